@@ -1,0 +1,85 @@
+# Penitentes: from ablation physics to light-in-flight videos.
+# `make help` lists the targets. `make demo` and `make test` set everything up on a fresh
+# Debian 12 machine (as root): Debian packages, then .venv with the package built in it.
+# Stamp files under .stamps/ keep a second run fast when nothing changed.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DEFAULT_GOAL := help
+MAKEFLAGS += --no-print-directory
+
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMPS := .stamps
+CONFIG ?= configs/demo.yaml
+PYTEST_ARGS ?=
+export PATH := $(abspath $(VENV))/bin:$(PATH)
+
+# Debian packages: compiler and Python headers, Embree 3 for the ray engine, LLVM 19 for
+# Mitsuba's llvm_ad_rgb variant (older LLVMs crash it), OSMesa/EGL for pyvista's off-screen
+# rendering, Chromium to check the HTML report, and git for manifests' revisions.
+APT_PACKAGES := build-essential git python3 python3-venv python3-dev libembree-dev libllvm19 \
+	libosmesa6 libegl1 libgl1 libglx-mesa0 libxrender1 chromium
+
+CORE_SOURCES := $(shell find render/core -name '*.cpp' -o -name '*.hpp' -o -name 'CMakeLists.txt') CMakeLists.txt
+PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find pipeline geometry render -name '__init__.py')
+
+.PHONY: help setup demo test test-all test-cpp test-py bench sweep sanitize clean distclean
+
+help: ## List the targets
+	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  make %-10s %s\n", $$1, $$2}'
+
+setup: $(STAMPS)/package ## Install Debian packages and .venv with the package built in it (idempotent)
+
+demo: setup ## Run the whole pipeline on configs/demo.yaml (CONFIG=... for another)
+	$(PY) -m pipeline run $(CONFIG)
+
+test: setup ## Run the C++ tests (ctest) and the Python tests (pytest), except those marked slow
+	$(MAKE) test-cpp
+	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+
+test-all: setup ## Run every test, the slow ones included
+	$(MAKE) test-cpp
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+test-cpp: $(STAMPS)/venv
+	cmake -S render/core -B build/ctest -G Ninja -DCMAKE_BUILD_TYPE=Release -DPTPB_BUILD_TESTS=ON > build-ctest.log 2>&1 || (cat build-ctest.log; exit 1)
+	cmake --build build/ctest
+	ctest --test-dir build/ctest --output-on-failure
+	@rm -f build-ctest.log
+
+bench: setup ## Benchmarks: ray engine throughput, geometry stage against grid size
+	$(PY) benchmarks/bench_rays.py
+	@if [ -f benchmarks/bench_geometry.py ]; then $(PY) benchmarks/bench_geometry.py; fi
+
+sweep: setup ## Config sweeps over optical parameter sets (not yet available)
+	@echo "make sweep: not yet available (the sweep engine is tracked in its own issue)"
+
+clean: ## Remove build folders and run outputs (keeps .venv)
+	rm -rf build runs $(STAMPS)/package
+
+distclean: clean ## Also remove .venv and every stamp
+	rm -rf $(VENV) $(STAMPS)
+
+$(STAMPS)/apt: Makefile
+	@mkdir -p $(STAMPS)
+	@missing=$$(for p in $(APT_PACKAGES); do \
+	  [ "$$(dpkg-query -W -f='$${db:Status-Abbrev}' $$p 2>/dev/null)" = "ii " ] || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "Installing Debian packages: $$missing"; \
+	  if [ "$$(id -u)" != 0 ]; then echo "error: run as root, or install these Debian packages first: $$missing" >&2; exit 1; fi; \
+	  export DEBIAN_FRONTEND=noninteractive; \
+	  apt-get update -qq && apt-get install -y -qq --no-install-recommends $$missing > $(STAMPS)/apt.log 2>&1 || { tail -30 $(STAMPS)/apt.log; exit 1; }; \
+	fi
+	@touch $@
+
+$(STAMPS)/venv: requirements.lock $(STAMPS)/apt
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements.lock
+	@touch $@
+
+$(STAMPS)/package: $(STAMPS)/venv $(PACKAGE_MARKERS)
+	$(PY) -m pip install -q --no-build-isolation --no-deps -e .
+	@touch $@

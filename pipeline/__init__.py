@@ -1,0 +1,1 @@
+"""Pipeline: the CLI, the config schema, the stage runner with manifests, and sweeps."""

@@ -1,0 +1,91 @@
+"""Command-line interface: ``python -m pipeline {validate,run,stages} ...``."""
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+import yaml
+
+from pipeline.config import ConfigError, load_config
+from pipeline.log import setup_logging
+from pipeline.runner import StageError, run_dir, run_stages
+
+app = typer.Typer(
+    help="Penitentes pipeline: geometry -> scene -> render (ours, reference) -> composite -> compare.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+log = logging.getLogger("pipeline")
+
+CONFIG_ARG = typer.Argument(..., help="YAML config file.", exists=False, dir_okay=False)
+SET_OPTION = typer.Option(
+    None, "--set", "-s", help="Override one key, e.g. --set render.iterations=16 (value in YAML syntax). Repeatable."
+)
+
+
+def _load_or_exit(config_path: Path, overrides: Optional[List[str]]):
+    try:
+        return load_config(config_path, overrides or [])
+    except ConfigError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=2) from None
+
+
+@app.command()
+def validate(config: Path = CONFIG_ARG, overrides: Optional[List[str]] = SET_OPTION) -> None:
+    """Validate CONFIG and print the resolved config (bases merged, defaults filled in)."""
+    cfg = _load_or_exit(config, overrides)
+    typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False), nl=False)
+    typer.echo(f"# {config}: valid", err=True)
+
+
+@app.command()
+def stages() -> None:
+    """List the pipeline's stages in order, with what each depends on."""
+    from pipeline.stages import STAGES
+
+    for stage in STAGES:
+        typer.echo(f"{stage.name:<10} {stage.description}")
+        typer.echo(f"{'':<10} config keys: {', '.join(stage.config_keys)}; upstream: {', '.join(stage.upstream) or '-'}")
+
+
+@app.command()
+def run(
+    config: Path = CONFIG_ARG,
+    stage: Optional[List[str]] = typer.Option(None, "--stage", help="Run only this stage (repeatable)."),
+    force: bool = typer.Option(False, "--force", help="Re-run the selected stages even if up to date."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; warnings and errors only."),
+    resume: bool = typer.Option(False, "--resume", help="Continue interrupted progressive renders from their last checkpoint."),
+    overrides: Optional[List[str]] = SET_OPTION,
+) -> None:
+    """Run the pipeline on CONFIG. Finished stages whose inputs did not change are skipped."""
+    setup_logging(quiet)
+    cfg = _load_or_exit(config, overrides)
+    from pipeline.stages import STAGES
+
+    try:
+        results = run_stages(cfg, STAGES, only=stage, force=force, quiet=quiet, resume=resume)
+    except (StageError, ConfigError, ValueError, FileNotFoundError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=1) from None
+    except KeyboardInterrupt:
+        typer.echo("interrupted: finished stages are kept; the interrupted one left nothing behind", err=True)
+        raise typer.Exit(code=130) from None
+    typer.echo(f"\nRun '{cfg.name}': outputs under {run_dir(cfg).resolve()}")
+    for result in results:
+        took = f"{result.seconds:7.1f} s" if result.status == "ran" else "        "
+        typer.echo(f"  {result.name:<10} {result.status:<9} {took}  {result.out_dir}")
+        if result.summary and result.status == "ran":
+            typer.echo("             " + json.dumps(result.summary, default=str)[:300])
+
+
+def main() -> None:
+    try:
+        app()
+    except BrokenPipeError:
+        sys.exit(1)

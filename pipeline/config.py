@@ -1,0 +1,167 @@
+"""Load YAML configs into the validated pydantic model, with ``extends`` and ``--set`` overrides.
+
+A config file is a YAML mapping. It may name base files it extends:
+
+    extends: [presets/sites/tapado.yaml, base.yaml]   # resolved next to this file, then in configs/
+    render:
+      iterations: 64
+
+Bases are merged in order, then the file itself on top: mappings merge key by key, any other
+value (lists included) replaces the base's. Errors name the file, or the key path, the value and
+what is allowed.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import yaml
+from pydantic import ValidationError
+
+from pipeline.paths import CONFIGS_DIR
+
+
+class ConfigError(ValueError):
+    """A config that cannot be loaded or validated. The message is meant for people."""
+
+
+def deep_merge(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+    merged = copy.deepcopy(dict(base))
+    for key, value in override.items():
+        if isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = deep_merge(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
+def _read_yaml_mapping(path: Path) -> dict[str, Any]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {path}") from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read config file {path}: {exc.strerror}") from None
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ConfigError(f"{path}{where}: invalid YAML: {problem}") from None
+    if document is None:
+        return {}
+    if not isinstance(document, dict):
+        raise ConfigError(f"{path}: a config must be a YAML mapping of keys to values, got {type(document).__name__}")
+    for key in document:
+        if not isinstance(key, str):
+            raise ConfigError(f"{path}: config keys must be strings, got {key!r}")
+    return document
+
+
+def _resolve_base(name: Any, including_file: Path) -> Path:
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{including_file}: 'extends' entries must be file paths, got {name!r}")
+    candidates = [including_file.parent / name, CONFIGS_DIR / name]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate.resolve()
+    raise ConfigError(
+        f"{including_file}: extends '{name}', which was found neither next to it nor in {CONFIGS_DIR}"
+    )
+
+
+def load_raw(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """Read a config file and everything it extends into one merged mapping (not yet validated)."""
+    path = Path(path).resolve()
+    if path in _chain:
+        cycle = " -> ".join(str(p) for p in (*_chain, path))
+        raise ConfigError(f"'extends' forms a cycle: {cycle}")
+    document = _read_yaml_mapping(path)
+    bases = document.pop("extends", [])
+    if isinstance(bases, str):
+        bases = [bases]
+    if not isinstance(bases, list):
+        raise ConfigError(f"{path}: 'extends' must be a file path or a list of file paths")
+    merged: dict[str, Any] = {}
+    for base in bases:
+        merged = deep_merge(merged, load_raw(_resolve_base(base, path), (*_chain, path)))
+    return deep_merge(merged, document)
+
+
+def parse_override(assignment: str) -> tuple[list[str], Any]:
+    """Parse ``key.path=value`` (value in YAML syntax) as given to ``--set``."""
+    key, sep, value_text = assignment.partition("=")
+    if not sep or not key.strip():
+        raise ConfigError(f"override '{assignment}' must look like key.path=value")
+    try:
+        value = yaml.safe_load(value_text) if value_text.strip() else None
+    except yaml.YAMLError:
+        value = value_text
+    return key.strip().split("."), value
+
+
+def apply_overrides(raw: dict[str, Any], assignments: Iterable[str]) -> dict[str, Any]:
+    result = copy.deepcopy(raw)
+    for assignment in assignments:
+        keys, value = parse_override(assignment)
+        node = result
+        for k in keys[:-1]:
+            if not isinstance(node.get(k), dict):
+                node[k] = {}
+            node = node[k]
+        node[keys[-1]] = value
+    return result
+
+
+def format_validation_error(error: ValidationError, source: str) -> str:
+    lines = [f"{source}: {error.error_count()} problem(s) in the config:"]
+    for item in error.errors(include_url=False):
+        key_path = ".".join(str(part) for part in item["loc"]) or "(top level)"
+        if item["type"] == "extra_forbidden":
+            lines.append(f"  {key_path}: unknown key (value {item['input']!r}); remove it or check its spelling")
+            continue
+        if item["type"] == "missing":
+            lines.append(f"  {key_path}: required key is missing")
+            continue
+        value = item.get("input")
+        value_text = repr(value) if not isinstance(value, dict) else "a mapping"
+        if len(value_text) > 80:
+            value_text = value_text[:77] + "..."
+        lines.append(f"  {key_path}: value {value_text} is not allowed: {item['msg']}")
+    return "\n".join(lines)
+
+
+def validate(raw: Mapping[str, Any], source: str = "config"):
+    from pipeline.schema import Config
+
+    try:
+        return Config.model_validate(dict(raw))
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc, source)) from None
+
+
+def load_config(path: str | Path, overrides: Iterable[str] = ()):
+    """Load, merge, override and validate a config file. The run name defaults to the file stem."""
+    path = Path(path)
+    raw = apply_overrides(load_raw(path), overrides)
+    raw.setdefault("name", path.stem)
+    return validate(raw, source=str(path))
+
+
+def subtree(config_dump: Mapping[str, Any], dotted_key: str) -> Any:
+    node: Any = config_dump
+    for part in dotted_key.split("."):
+        node = node[part]
+    return node
+
+
+def config_hash(config, keys: Iterable[str]) -> str:
+    """SHA-256 of the canonical JSON of the named config subtrees: what a stage depends on."""
+    dump = config.model_dump(mode="json")
+    selected = {key: subtree(dump, key) for key in sorted(set(keys))}
+    canonical = json.dumps(selected, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()

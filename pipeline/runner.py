@@ -1,0 +1,190 @@
+"""The stage runner: runs stages in order, skips the ones whose manifest matches, and never
+leaves a half-written stage visible.
+
+Each stage writes into a private staging folder ``runs/<name>/.<stage>.staging-<pid>``. Only
+when the stage function has returned and its manifest is written is the folder renamed to
+``runs/<name>/<stage>``. A stage killed at any moment therefore leaves either its previous
+complete output or nothing, and the next run redoes exactly the unfinished stages.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from pipeline.atomic import write_json_atomic
+from pipeline.config import config_hash
+from pipeline.manifest import (
+    MANIFEST_NAME,
+    MANIFEST_VERSION,
+    git_revision,
+    hash_outputs,
+    outputs_digest,
+    outputs_intact,
+    read_manifest,
+)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class StageContext:
+    """What a stage function gets: the config, its output folder and its upstream folders."""
+
+    config: Any
+    out_dir: Path
+    inputs: dict[str, Path]
+    quiet: bool = False
+    resume: bool = False
+    previous_dir: Path | None = None  # the last complete output of this stage, if any (for resume)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """A pipeline stage: a plain function plus what it depends on."""
+
+    name: str
+    func: Callable[[StageContext], dict[str, Any] | None]
+    config_keys: tuple[str, ...]
+    upstream: tuple[str, ...] = ()
+    description: str = ""
+    enabled: Callable[[Any], bool] = field(default=lambda config: True)
+
+
+@dataclass
+class StageResult:
+    name: str
+    status: str  # "ran", "skipped" (up to date) or "disabled"
+    out_dir: Path
+    seconds: float = 0.0
+    summary: dict[str, Any] | None = None
+
+
+class StageError(RuntimeError):
+    """A stage could not run; the message says which and why."""
+
+
+def run_dir(config) -> Path:
+    return Path(config.runs_dir) / config.name
+
+
+def _remove_leftovers(base: Path, stage: str) -> None:
+    for leftover in base.glob(f".{stage}.staging-*"):
+        shutil.rmtree(leftover, ignore_errors=True)
+    for leftover in base.glob(f".{stage}.old-*"):
+        shutil.rmtree(leftover, ignore_errors=True)
+
+
+def _publish(staging: Path, final: Path) -> None:
+    """Swap the finished staging folder in for the stage's folder."""
+    old = final.with_name(f".{final.name}.old-{os.getpid()}")
+    if final.exists():
+        os.replace(final, old)
+    os.replace(staging, final)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def stage_status(config, stage: Stage, inputs_digests: dict[str, str]) -> tuple[bool, dict | None]:
+    """Whether the stage's finished output matches the current config and inputs."""
+    final = run_dir(config) / stage.name
+    manifest = read_manifest(final)
+    if manifest is None:
+        return False, None
+    up_to_date = (
+        manifest.get("config_hash") == config_hash(config, stage.config_keys)
+        and manifest.get("inputs") == inputs_digests
+        and outputs_intact(final, manifest)
+    )
+    return up_to_date, manifest
+
+
+def run_stages(
+    config,
+    stages: Sequence[Stage],
+    only: Sequence[str] | None = None,
+    force: bool = False,
+    quiet: bool = False,
+    resume: bool = False,
+) -> list[StageResult]:
+    """Run ``stages`` (already in dependency order) for ``config``; return what happened to each.
+
+    ``only`` restricts the run to the named stages; their upstream stages must be finished.
+    ``force`` re-runs the selected stages even when their manifests match.
+    """
+    by_name = {s.name: s for s in stages}
+    for name in only or ():
+        if name not in by_name:
+            raise StageError(f"unknown stage '{name}'; the stages are: {', '.join(by_name)}")
+    base = run_dir(config)
+    base.mkdir(parents=True, exist_ok=True)
+    digests: dict[str, str] = {}
+    results: list[StageResult] = []
+    for stage in stages:
+        final = base / stage.name
+        selected = only is None or stage.name in only
+        if not stage.enabled(config):
+            results.append(StageResult(stage.name, "disabled", final))
+            continue
+        missing = [u for u in stage.upstream if u in by_name and by_name[u].enabled(config) and u not in digests]
+        if missing:
+            raise StageError(
+                f"stage '{stage.name}' needs the output of {', '.join(missing)}, which is not finished; "
+                f"run without --stage first"
+            )
+        inputs = {u: digests[u] for u in stage.upstream if u in digests}
+        up_to_date, manifest = stage_status(config, stage, inputs)
+        if not selected:
+            if up_to_date and manifest is not None:
+                digests[stage.name] = manifest["outputs_digest"]
+            continue
+        if up_to_date and not force and manifest is not None:
+            log.info("stage %s is up to date (%s)", stage.name, final)
+            digests[stage.name] = manifest["outputs_digest"]
+            results.append(StageResult(stage.name, "skipped", final, summary=manifest.get("summary")))
+            continue
+        _remove_leftovers(base, stage.name)
+        staging = base / f".{stage.name}.staging-{os.getpid()}"
+        staging.mkdir(parents=True)
+        log.info("stage %s: running", stage.name)
+        started = datetime.now(timezone.utc)
+        t0 = time.perf_counter()
+        context = StageContext(
+            config=config,
+            out_dir=staging,
+            inputs={u: base / u for u in stage.upstream if u in digests},
+            quiet=quiet,
+            resume=resume,
+            previous_dir=final if final.exists() else None,
+        )
+        try:
+            summary = stage.func(context) or {}
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        seconds = time.perf_counter() - t0
+        outputs = hash_outputs(staging)
+        record = {
+            "version": MANIFEST_VERSION,
+            "stage": stage.name,
+            "run": config.name,
+            "config_keys": list(stage.config_keys),
+            "config_hash": config_hash(config, stage.config_keys),
+            "inputs": inputs,
+            "outputs": outputs,
+            "outputs_digest": outputs_digest(outputs),
+            "git_revision": git_revision(),
+            "started_utc": started.isoformat(timespec="seconds"),
+            "seconds": round(seconds, 3),
+            "summary": summary,
+        }
+        write_json_atomic(staging / MANIFEST_NAME, record)
+        _publish(staging, final)
+        digests[stage.name] = record["outputs_digest"]
+        log.info("stage %s: done in %.1f s -> %s", stage.name, seconds, final)
+        results.append(StageResult(stage.name, "ran", final, seconds, summary))
+    return results

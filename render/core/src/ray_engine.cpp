@@ -1,0 +1,197 @@
+#include "ptpb/ray_engine.hpp"
+
+#include <embree3/rtcore.h>
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "ptpb/parallel.hpp"
+
+namespace ptpb {
+namespace {
+
+constexpr std::size_t kRayChunk = 4096;
+
+void throw_device_error(RTCDevice device, const char* what) {
+  const RTCError code = rtcGetDeviceError(device);
+  if (code != RTC_ERROR_NONE) {
+    throw std::runtime_error(std::string("Embree error during ") + what + " (code " +
+                             std::to_string(static_cast<int>(code)) + ")");
+  }
+}
+
+}  // namespace
+
+struct RayScene::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  // Own copies of the geometry, used for normals (and by later consumers of hits).
+  std::vector<std::vector<float>> vertices;
+  std::vector<std::vector<std::uint32_t>> faces;
+};
+
+RayScene::RayScene() : impl_(std::make_unique<Impl>()) {
+  impl_->device = rtcNewDevice(nullptr);
+  if (!impl_->device) throw std::runtime_error("Embree could not create a device");
+  impl_->scene = rtcNewScene(impl_->device);
+  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
+  throw_device_error(impl_->device, "scene creation");
+}
+
+RayScene::~RayScene() {
+  if (impl_->scene) rtcReleaseScene(impl_->scene);
+  if (impl_->device) rtcReleaseDevice(impl_->device);
+}
+
+void RayScene::add_mesh(const float* vertices, std::size_t vertex_count,
+                        const std::uint32_t* faces, std::size_t face_count,
+                        std::uint32_t mesh_id) {
+  if (committed_) throw std::logic_error("add_mesh called after commit()");
+  if (vertex_count < 3 || face_count == 0) {
+    throw std::invalid_argument("mesh " + std::to_string(mesh_id) +
+                                " is empty: it needs at least 3 vertices and 1 triangle");
+  }
+  if (mesh_id == kInvalidId) throw std::invalid_argument("mesh id 4294967295 is reserved");
+  for (std::size_t i = 0; i < 3 * vertex_count; ++i) {
+    if (!std::isfinite(vertices[i])) {
+      throw std::invalid_argument("mesh " + std::to_string(mesh_id) + ": vertex " +
+                                  std::to_string(i / 3) + " has a non-finite coordinate");
+    }
+  }
+  for (std::size_t i = 0; i < 3 * face_count; ++i) {
+    if (faces[i] >= vertex_count) {
+      throw std::invalid_argument("mesh " + std::to_string(mesh_id) + ": face " +
+                                  std::to_string(i / 3) + " refers to vertex " +
+                                  std::to_string(faces[i]) + " but the mesh has only " +
+                                  std::to_string(vertex_count) + " vertices");
+    }
+  }
+  RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vbuf = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertex_count));
+  auto* ibuf = static_cast<std::uint32_t*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(std::uint32_t), face_count));
+  if (!vbuf || !ibuf) {
+    rtcReleaseGeometry(geom);
+    throw std::runtime_error("Embree could not allocate buffers for mesh " +
+                             std::to_string(mesh_id));
+  }
+  std::copy(vertices, vertices + 3 * vertex_count, vbuf);
+  std::copy(faces, faces + 3 * face_count, ibuf);
+  for (std::size_t i = 0; i < vertex_count; ++i) {
+    Vec3f v(vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]);
+    for (int a = 0; a < 3; ++a) {
+      bounds_.lower[a] = std::min(bounds_.lower[a], v[a]);
+      bounds_.upper[a] = std::max(bounds_.upper[a], v[a]);
+    }
+  }
+  rtcCommitGeometry(geom);
+  const unsigned geom_id = rtcAttachGeometry(impl_->scene, geom);
+  rtcReleaseGeometry(geom);
+  throw_device_error(impl_->device, "add_mesh");
+  if (geom_id != mesh_ids_.size()) throw std::logic_error("unexpected Embree geometry id");
+  mesh_ids_.push_back(mesh_id);
+  impl_->vertices.emplace_back(vertices, vertices + 3 * vertex_count);
+  impl_->faces.emplace_back(faces, faces + 3 * face_count);
+  triangle_count_ += face_count;
+}
+
+void RayScene::commit() {
+  rtcCommitScene(impl_->scene);
+  throw_device_error(impl_->device, "scene commit (BVH build)");
+  committed_ = true;
+}
+
+void RayScene::require_committed() const {
+  if (!committed_) throw std::logic_error("RayScene must be committed before it is queried");
+}
+
+Hit RayScene::intersect(const Vec3f& origin, const Vec3f& direction, float tnear,
+                        float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh;
+  rh.ray.org_x = origin.x; rh.ray.org_y = origin.y; rh.ray.org_z = origin.z;
+  rh.ray.dir_x = direction.x; rh.ray.dir_y = direction.y; rh.ray.dir_z = direction.z;
+  rh.ray.tnear = tnear;
+  rh.ray.tfar = tfar;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.flags = 0;
+  rh.ray.time = 0.0f;
+  rh.ray.id = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene, &context, &rh);
+  Hit hit;
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
+  hit.t = rh.ray.tfar;
+  hit.prim_id = rh.hit.primID;
+  hit.mesh_id = mesh_ids_[rh.hit.geomID];
+  const auto& v = impl_->vertices[rh.hit.geomID];
+  const auto& f = impl_->faces[rh.hit.geomID];
+  const std::uint32_t* tri = &f[3 * static_cast<std::size_t>(rh.hit.primID)];
+  const Vec3f p0(v[3 * tri[0]], v[3 * tri[0] + 1], v[3 * tri[0] + 2]);
+  const Vec3f p1(v[3 * tri[1]], v[3 * tri[1] + 1], v[3 * tri[1] + 2]);
+  const Vec3f p2(v[3 * tri[2]], v[3 * tri[2] + 1], v[3 * tri[2] + 2]);
+  // Counter-clockwise winding seen from the front gives the normal (right-hand rule).
+  const Vec3d n = cross(Vec3d(p1 - p0), Vec3d(p2 - p0));
+  const double len = length(n);
+  hit.normal = len > 0 ? Vec3f(n / len) : Vec3f(0, 0, 0);
+  return hit;
+}
+
+bool RayScene::occluded(const Vec3f& origin, const Vec3f& direction, float tnear,
+                        float tfar) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay ray;
+  ray.org_x = origin.x; ray.org_y = origin.y; ray.org_z = origin.z;
+  ray.dir_x = direction.x; ray.dir_y = direction.y; ray.dir_z = direction.z;
+  ray.tnear = tnear;
+  ray.tfar = tfar;
+  ray.mask = 0xFFFFFFFFu;
+  ray.flags = 0;
+  ray.time = 0.0f;
+  ray.id = 0;
+  rtcOccluded1(impl_->scene, &context, &ray);
+  return ray.tfar == -std::numeric_limits<float>::infinity();
+}
+
+void RayScene::intersect_batch(const float* origins, const float* directions, std::size_t n,
+                               float tnear, const float* tfar, float* t_out,
+                               std::uint32_t* prim_out, std::uint32_t* mesh_out,
+                               float* normal_out, int threads) const {
+  require_committed();
+  parallel_for_chunks(n, kRayChunk, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const Vec3f o(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
+      const Vec3f d(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
+      const float far = tfar ? tfar[i] : std::numeric_limits<float>::infinity();
+      const Hit h = intersect(o, d, tnear, far);
+      t_out[i] = h.t;
+      prim_out[i] = h.prim_id;
+      mesh_out[i] = h.mesh_id;
+      normal_out[3 * i] = h.normal.x;
+      normal_out[3 * i + 1] = h.normal.y;
+      normal_out[3 * i + 2] = h.normal.z;
+    }
+  });
+}
+
+void RayScene::occluded_batch(const float* origins, const float* directions, std::size_t n,
+                              float tnear, const float* tfar, bool* occluded_out,
+                              int threads) const {
+  require_committed();
+  parallel_for_chunks(n, kRayChunk, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const Vec3f o(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
+      const Vec3f d(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
+      const float far = tfar ? tfar[i] : std::numeric_limits<float>::infinity();
+      occluded_out[i] = occluded(o, d, tnear, far);
+    }
+  });
+}
+
+}  // namespace ptpb
