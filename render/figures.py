@@ -1,0 +1,142 @@
+"""Matplotlib figures: streak images, side-by-side comparisons, error curves and poster grids.
+
+Every function writes its files atomically and returns the paths it wrote. Figures are saved as
+PNG, and as PDF too where they are meant for print (error curves, poster grids).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from pipeline.atomic import atomic_path  # noqa: E402
+from render.tonemap import ToneCurve, luminance, to_display  # noqa: E402
+from render.video import PS_PER_M_OPL  # noqa: E402
+
+
+def _save(fig, path: Path, pdf: bool = False) -> list[Path]:
+    written = []
+    for target in [path] + ([path.with_suffix(".pdf")] if pdf else []):
+        with atomic_path(target) as tmp:
+            fig.savefig(tmp, dpi=150, bbox_inches="tight")
+        written.append(target)
+    plt.close(fig)
+    return written
+
+
+def streak_image(
+    frames: np.ndarray,
+    axis: str,
+    index: int,
+    start_opl: float,
+    bin_width_opl: float,
+    scale: float,
+    path: Path,
+    curve: ToneCurve = "reinhard",
+) -> list[Path]:
+    """An x–t slice (axis='x', at image row ``index``) or y–t slice (axis='y', at column ``index``)."""
+    frames = np.asarray(frames)
+    t_count, height, width = frames.shape[:3]
+    if axis == "x":
+        if not 0 <= index < height:
+            raise ValueError(f"streak row {index} is outside the image (0..{height - 1})")
+        slab, extent_space, label = frames[:, index, :, :], width, f"x (pixel), row {index}"
+    elif axis == "y":
+        if not 0 <= index < width:
+            raise ValueError(f"streak column {index} is outside the image (0..{width - 1})")
+        slab, extent_space, label = frames[:, :, index, :], height, f"y (pixel), column {index}"
+    else:
+        raise ValueError(f"streak axis must be 'x' or 'y', got {axis!r}")
+    t0_ps = start_opl * PS_PER_M_OPL
+    t1_ps = (start_opl + t_count * bin_width_opl) * PS_PER_M_OPL
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    ax.imshow(to_display(slab, scale, curve), aspect="auto", origin="lower",
+              extent=(0, extent_space, t0_ps, t1_ps), interpolation="nearest")
+    ax.set_xlabel(label)
+    ax.set_ylabel("time (ps)")
+    ax.set_title(f"Streak image ({axis}–t)")
+    return _save(fig, path)
+
+
+def relative_difference(a: np.ndarray, b: np.ndarray, floor: float | None = None) -> np.ndarray:
+    """|L(a) − L(b)| / max(L(b), floor) on luminance; the floor defaults to 1% of the mean of L(b)."""
+    la, lb = luminance(a), luminance(b)
+    if floor is None:
+        floor = max(1e-12, 0.01 * float(np.mean(np.abs(lb))))
+    return np.abs(la - lb) / np.maximum(np.abs(lb), floor)
+
+
+def side_by_side_still(
+    a: np.ndarray, b: np.ndarray, labels: tuple[str, str], scale: float, path: Path,
+    curve: ToneCurve = "reinhard", title: str | None = None, vmax: float = 1.0,
+) -> list[Path]:
+    """Two images and the heat map of their relative difference, with a colour bar."""
+    if a.shape != b.shape:
+        raise ValueError(f"side-by-side images differ in shape: {a.shape} vs {b.shape}")
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4.2))
+    for ax, image, label in zip(axes[:2], (a, b), labels):
+        ax.imshow(to_display(image, scale, curve), interpolation="nearest")
+        ax.set_title(label)
+        ax.axis("off")
+    diff = relative_difference(a, b)
+    im = axes[2].imshow(diff, cmap="inferno", vmin=0, vmax=vmax, interpolation="nearest")
+    axes[2].set_title(f"relative difference (mean {np.mean(diff):.3f})")
+    axes[2].axis("off")
+    fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.04, label="|a − b| / b")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+def error_curves(
+    series: Mapping[str, Sequence[Mapping[str, float]]], path: Path, metric: str = "relmse"
+) -> list[Path]:
+    """Error against wall time and against iterations (or spp), log–log, one line per renderer.
+
+    ``series[name]`` is a list of points with keys ``seconds``, ``iterations`` and ``metric``.
+    """
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for name, points in series.items():
+        pts = [p for p in points if p.get(metric, 0) > 0 and p.get("seconds", 0) > 0]
+        if not pts:
+            continue
+        seconds = [p["seconds"] for p in pts]
+        iterations = [p["iterations"] for p in pts]
+        errors = [p[metric] for p in pts]
+        axes[0].loglog(seconds, errors, "o-", label=name)
+        axes[1].loglog(iterations, errors, "o-", label=name)
+    axes[0].set_xlabel("wall time (s)")
+    axes[1].set_xlabel("iterations / samples per pixel")
+    for ax in axes:
+        ax.set_ylabel(metric)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+    fig.suptitle(f"{metric} against the reference")
+    return _save(fig, path, pdf=True)
+
+
+def poster_grid(
+    images: Sequence[np.ndarray], labels: Sequence[str], path: Path, curve: ToneCurve = "reinhard",
+    columns: int = 3, title: str | None = None, percentile: float = 99.5,
+) -> list[Path]:
+    """A labelled grid of renders sharing one exposure, so brightness compares across panels."""
+    from render.tonemap import exposure_scale
+
+    if len(images) != len(labels) or not images:
+        raise ValueError("poster grid needs one label per image and at least one image")
+    scale = exposure_scale(np.stack([np.asarray(i) for i in images]), percentile)
+    rows = int(np.ceil(len(images) / columns))
+    fig, axes = plt.subplots(rows, columns, figsize=(4 * columns, 4.2 * rows), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, image, label in zip(axes.flat, images, labels):
+        ax.imshow(to_display(image, scale, curve), interpolation="nearest")
+        ax.set_title(label, fontsize=9)
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path, pdf=True)

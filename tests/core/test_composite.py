@@ -1,0 +1,86 @@
+"""Compositing: exposure keeps brightness order, videos decode with the right size and count,
+and the error metrics match hand-computed values."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.schema.composite import CompositeConfig
+from render.composite import Film, side_by_side, streak_images, transient_videos
+from render.metrics import per_frame_relmse, relmse, rmse
+from render.tonemap import display_frames, luminance
+from render.video import PS_PER_M_OPL, probe_mp4
+
+
+def pulse_frames(t_count=12, height=20, width=30, seed=0):
+    """A bright spot moving right at constant speed over a faint noisy background."""
+    rng = np.random.default_rng(seed)
+    frames = 0.01 * rng.random((t_count, height, width, 3), dtype=np.float32)
+    for k in range(t_count):
+        frames[k, height // 2 - 2: height // 2 + 2, 2 * k: 2 * k + 3] += np.array([1.0, 0.8, 0.6], dtype=np.float32)
+    return frames
+
+
+def test_global_exposure_keeps_brightness_order():
+    base = pulse_frames()
+    frames = np.stack([base[3], 2 * base[3], 0.5 * base[3]])
+    for curve in ("reinhard", "filmic", "linear"):
+        display, scales = display_frames(frames, curve=curve)
+        assert np.all(scales == scales[0])
+        mean = luminance(display.astype(np.float64)).mean(axis=(1, 2))
+        assert mean[1] > mean[0] > mean[2], curve
+        # And pixel by pixel: twice the energy is never displayed darker.
+        assert np.all(display[1].astype(int) >= display[0].astype(int))
+    # Per-frame normalisation removes the difference, as documented.
+    _, scales = display_frames(frames, per_frame=True)
+    assert scales[1] == pytest.approx(scales[0] / 2)
+
+
+def test_videos_decode_with_the_right_frame_count_and_size(tmp_path):
+    frames = pulse_frames(t_count=9, height=21, width=30)
+    cfg = CompositeConfig(video_min_height=64, fps=10)
+    paths = transient_videos(frames, Film(0.0, 0.003), cfg, tmp_path, metres_per_pixel=0.01)
+    for key in ("video", "cumulative_video"):
+        info = probe_mp4(paths[key])
+        # 21 rows upscaled x4 to 84 (>= 64), 30 columns to 120; both already even.
+        assert info == {"codec": "h264", "frames": 9, "width": 120, "height": 84}
+
+
+def test_slow_motion_sets_the_frame_rate_and_absurd_rates_are_refused(tmp_path):
+    film = Film(0.0, 0.003)
+    cfg = CompositeConfig(slow_motion=1e10)
+    assert cfg.frame_rate(0.003) == pytest.approx(1 / (1e10 * 0.003 / 299_792_458.0))
+    with pytest.raises(ValueError, match="composite.slow_motion"):
+        transient_videos(pulse_frames(), film, CompositeConfig(slow_motion=1.0), tmp_path)
+
+
+def test_streak_images_and_side_by_side(tmp_path):
+    frames = pulse_frames()
+    cfg = CompositeConfig(video_min_height=64)
+    paths = streak_images(frames, Film(0.0, 0.003), cfg, tmp_path)
+    assert paths["streak_x"].stat().st_size > 1000 and paths["streak_y"].stat().st_size > 1000
+    with pytest.raises(ValueError, match="composite.streak_row=99"):
+        streak_images(frames, Film(0.0, 0.003), CompositeConfig(streak_row=99), tmp_path)
+    out = side_by_side(frames, frames * 1.1, ("ours", "reference"), Film(0.0, 0.003), cfg, tmp_path)
+    assert probe_mp4(out["side_by_side_video"])["frames"] == len(frames)
+    assert out["side_by_side_still"].stat().st_size > 1000
+
+
+def test_error_metrics_match_hand_computed_values():
+    reference = np.array([[1.0, 0.0], [2.0, 0.1]])
+    estimate = np.array([[1.5, 0.1], [1.0, 0.1]])
+    # relMSE: (0.25/1.01 + 0.01/0.01 + 1/4.01 + 0/0.02) / 4
+    expected = (0.25 / 1.01 + 0.01 / 0.01 + 1.0 / 4.01 + 0.0) / 4
+    assert relmse(estimate, reference) == pytest.approx(expected, rel=1e-12)
+    assert rmse(estimate, reference) == pytest.approx(np.sqrt((0.25 + 0.01 + 1.0 + 0.0) / 4), rel=1e-12)
+    frames = np.stack([reference, estimate])
+    np.testing.assert_allclose(per_frame_relmse(frames, np.stack([reference, reference])), [0.0, expected])
+    with pytest.raises(ValueError, match="shapes differ"):
+        relmse(estimate, reference[:1])
+    with pytest.raises(ValueError, match="NaN"):
+        rmse(np.full((2, 2), np.nan), reference)
+
+
+def test_picosecond_conversion_uses_the_exact_speed_of_light():
+    assert PS_PER_M_OPL == pytest.approx(3335.640952, rel=1e-9)
+    assert 0.003 * PS_PER_M_OPL == pytest.approx(10.007, abs=1e-3)
