@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import re
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -117,10 +118,16 @@ def apply_overrides(raw: dict[str, Any], assignments: Iterable[str]) -> dict[str
     return result
 
 
+def format_key_path(parts) -> str:
+    """``render.ptpb.initial_radius``; odd keys (spaces, dots, empty) are quoted so they stay visible."""
+    shown = [str(p) if isinstance(p, int) or re.fullmatch(r"[A-Za-z0-9_-]+", str(p)) else repr(str(p)) for p in parts]
+    return ".".join(shown) or "(top level)"
+
+
 def format_validation_error(error: ValidationError, source: str) -> str:
     lines = [f"{source}: {error.error_count()} problem(s) in the config:"]
     for item in error.errors(include_url=False):
-        key_path = ".".join(str(part) for part in item["loc"]) or "(top level)"
+        key_path = format_key_path(item["loc"])
         if item["type"] == "extra_forbidden":
             lines.append(f"  {key_path}: unknown key (value {item['input']!r}); remove it or check its spelling")
             continue
