@@ -1,0 +1,84 @@
+"""Settings of our Progressive Transient Photon Beams renderer (ptpb.md §6 "Proposed keys")."""
+from __future__ import annotations
+
+from typing import Literal, Optional
+
+from pydantic import Field, model_validator
+
+from pipeline.schema.base import StrictModel
+
+
+class BeamRadius(StrictModel):
+    """Initial spatial kernel radius R_0 with an explicit unit."""
+
+    value: float = Field(..., gt=0, description="R_0 in the unit below [m | scene radii | pixel footprints].")
+    unit: Literal["m", "scene_radius", "pixel_footprint"] = Field(
+        "pixel_footprint",
+        description="m: absolute; scene_radius: fraction of the scene's bounding radius; pixel_footprint: "
+        "multiples of 2 z tan(fov/2) / P at the distance z from the camera to the scene centre [-].",
+    )
+
+
+class TimeHalfWidth(StrictModel):
+    """Initial temporal kernel half-width T_0 (gate mode) with an explicit unit."""
+
+    value: float = Field(..., gt=0, description="T_0 in the unit below [m OPL | bins | n R_0].")
+    unit: Literal["m_opl", "bin_width", "beam_radius"] = Field(
+        "beam_radius",
+        description="m_opl: metres of optical path; bin_width: multiples of bin_width_opl; beam_radius: value * n * R_0 "
+        "with n the largest medium index. A floor of bin_width_opl / 2 applies [-].",
+    )
+
+
+class PTPBConfig(StrictModel):
+    """Our PTPB renderer: light paths per iteration, bandwidth schedules, kernels and budgets."""
+
+    iterations: int = Field(64, ge=1, description="Number of progressive iterations (upper bound unless a time budget is set) [-].")
+    time_budget_s: Optional[float] = Field(
+        None, gt=0, description="Wall-clock budget; when set it overrides `iterations` (stops after the iteration in flight) [s]."
+    )
+    light_paths_per_iteration: int = Field(
+        20000, ge=1, lt=2**32, description="M: light paths launched per iteration; every sum is divided by M [-]."
+    )
+    alpha: Optional[float] = Field(
+        None, gt=0, le=1,
+        description="Kernel-volume schedule parameter; null picks 2/3 for gate and 4/5 for bins/steady [-].",
+    )
+    initial_beam_radius: BeamRadius = Field(
+        default_factory=lambda: BeamRadius(value=2.0, unit="pixel_footprint"),
+        description="R_0, the initial 1D spatial kernel radius [see unit].",
+    )
+    initial_time_half_width: TimeHalfWidth = Field(
+        default_factory=lambda: TimeHalfWidth(value=1.0, unit="beam_radius"),
+        description="T_0, the initial temporal kernel half-width of gate mode [see unit].",
+    )
+    spatial_kernel: Literal["box", "epanechnikov"] = Field("epanechnikov", description="1D spatial kernel k_R [-].")
+    temporal_kernel: Literal["box", "epanechnikov", "quintic"] = Field(
+        "epanechnikov", description="Temporal kernel K_T of gate mode [-]."
+    )
+    photon_beam_kind: Literal["long", "short"] = Field("long", description="Photon beams run to the boundary (long) or to the next vertex (short) [-].")
+    query_beam_kind: Literal["long", "short"] = Field("long", description="Camera query segments, long or short [-].")
+    parallel_guard_sin2: float = Field(1e-5, ge=0, lt=1, description="Pairs with sin^2(theta) below this are skipped [-].")
+    max_depth: int = Field(64, ge=-1, description="Mitsuba's max_depth: non-null interactions + 1; -1 unbounded [-].")
+    rr_depth: int = Field(5, ge=1, description="Depth from which Russian roulette applies on both sides [-].")
+    seed: int = Field(0, ge=0, description="Key of every random stream [-].")
+    threads: int = Field(0, ge=0, description="Worker threads; 0 uses every core [-].")
+    accel: Literal["grid", "embree"] = Field(
+        "embree", description="Beam query structure: uniform grid of diced beams, or an Embree BVH over the same pieces [-]."
+    )
+    grid_resolution: int = Field(32, ge=1, le=1024, description="Grid cells along the longest axis [-].")
+    transmittance_cutoff: float = Field(
+        1e-4, gt=0, lt=1,
+        description="Long beams and queries end where the largest channel transmittance falls below this [-].",
+    )
+    camera_unwarp: bool = Field(False, description="Remove camera-side OPL from tau (never compare such frames with mitransient) [-].")
+    snapshot_every: int = Field(0, ge=0, description="Keep the steady average every k iterations (0: never) [-].")
+    frame_mode: Optional[Literal["steady", "bins", "gate"]] = Field(
+        None, description="Overrides the film's frame_mode when set [-]."
+    )
+
+    @model_validator(mode="after")
+    def _budget(self) -> "PTPBConfig":
+        if self.time_budget_s is None and self.iterations < 1:
+            raise ValueError("render.iterations must be >= 1 when no time_budget_s is given")
+        return self

@@ -1,0 +1,83 @@
+// The progressive transient photon-beam renderer: a pure function from scene and settings to
+// images (steady, frames) and run statistics.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "ptpb/kernels.hpp"
+#include "ptpb/scene.hpp"
+
+namespace ptpb {
+
+enum class BeamKind { Long, Short };
+enum class AccelKind { Grid, Embree };
+
+struct RenderSettings {
+  int iterations = 16;                 // upper bound on iterations
+  double time_budget_s = 0.0;          // wall-clock budget; > 0 stops after the iteration in flight
+  std::uint64_t light_paths_per_iteration = 10000;  // M
+  double alpha = 0.8;                  // kernel-volume schedule parameter (§6)
+  double initial_beam_radius = 0.01;   // R_0, m
+  double initial_time_half_width = 0.01;  // T_0, m of OPL (gate mode)
+  SpatialKernel spatial_kernel = SpatialKernel::Epanechnikov;
+  TemporalKernel temporal_kernel = TemporalKernel::Epanechnikov;
+  BeamKind photon_beam_kind = BeamKind::Long;
+  BeamKind query_beam_kind = BeamKind::Long;
+  double parallel_guard_sin2 = 1e-5;
+  int max_depth = -1;                  // Mitsuba meaning; -1 unbounded
+  int rr_depth = 5;
+  std::uint64_t seed = 0;
+  int threads = 0;                     // 0: all hardware threads
+  AccelKind accel = AccelKind::Embree;
+  int grid_resolution = 32;            // cells along the longest axis (grid only)
+  double dice_length = 0.0;            // beam piece length for the BVH/grid, m; 0 = automatic
+  bool jitter = true;                  // false: pixel-centre rays (analytic tests)
+  bool camera_unwarp = false;
+  double transmittance_cutoff = 1e-4;  // long beams/queries end where max-channel Tr drops below
+  int tile_size = 16;
+  int snapshot_every = 0;              // > 0: keep the steady average every k iterations
+};
+
+struct Progress {
+  int iteration = 0;       // iterations completed
+  int iterations = 0;      // planned
+  double elapsed_s = 0.0;
+  double radius = 0.0;     // R_i of the iteration in flight or just done
+  double time_half_width = 0.0;
+  std::uint64_t beams = 0;
+};
+
+// Returns false to cancel; called from the rendering thread, rate-limited.
+using ProgressCallback = std::function<bool(const Progress&)>;
+
+struct RenderStats {
+  int iterations_done = 0;
+  bool cancelled = false;
+  std::uint64_t light_paths = 0, beams = 0, queries = 0, candidates = 0, pair_evaluations = 0;
+  std::uint64_t parallel_rejected = 0, false_positives = 0, accel_references = 0;
+  double time_light_s = 0, time_build_s = 0, time_camera_s = 0, time_total_s = 0;
+  double final_radius = 0, final_time_half_width = 0;
+  double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check
+};
+
+struct RenderResult {
+  int width = 0, height = 0, frame_count = 0;
+  std::vector<float> steady;  // H x W x 3
+  std::vector<float> frames;  // F x H x W x 3
+  std::vector<float> early, late;  // H x W x 3: energy before / after the frame window
+  std::vector<int> snapshot_iterations;
+  std::vector<std::vector<float>> snapshots;  // steady averages, H x W x 3 each
+  RenderStats stats;
+};
+
+// Validates scene and settings (std::invalid_argument naming the parameter) and renders.
+RenderResult render(const Scene& scene, const RenderSettings& settings,
+                    const ProgressCallback& progress = nullptr);
+
+// Bandwidths of iteration i for a film mode (§6): gate shrinks R and T with gamma^(1/2),
+// bins/steady shrink R with gamma.
+void iteration_bandwidths(FrameMode mode, const RenderSettings& s, long iteration, double& radius,
+                          double& time_half_width);
+
+}  // namespace ptpb

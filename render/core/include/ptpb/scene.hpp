@@ -1,0 +1,85 @@
+// Plain scene description consumed by the PTPB renderer: media, shapes, lights, camera, film.
+// Everything is in metres; colours are linear RGB. Built by the Python face or by tests.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "ptpb/vec.hpp"
+
+namespace ptpb {
+
+constexpr int kVacuum = -1;  // medium id of the empty surroundings
+
+// Homogeneous medium with a Henyey–Greenstein phase function; `ior` is its group/region index.
+struct Medium {
+  Vec3d sigma_s{0, 0, 0};  // 1/m per channel
+  Vec3d sigma_a{0, 0, 0};  // 1/m per channel
+  double g = 0.0;
+  double ior = 1.0;
+  Vec3d sigma_t() const { return sigma_s + sigma_a; }
+};
+
+enum class SurfaceKind {
+  Null,        // index-matched boundary: only the current medium changes
+  Dielectric,  // smooth Fresnel interface between the region indices of the two sides
+  Diffuse,     // Lambertian reflector with `albedo`
+};
+
+// Closed (or open, for emitters) triangle mesh. The CCW winding gives the outward normal;
+// `interior`/`exterior` are medium ids on the two sides (kVacuum for none).
+struct Shape {
+  std::vector<float> vertices;      // N x 3
+  std::vector<std::uint32_t> faces; // M x 3
+  SurfaceKind kind = SurfaceKind::Null;
+  int interior = kVacuum;
+  int exterior = kVacuum;
+  Vec3d albedo{0, 0, 0};    // Diffuse only
+  Vec3d radiance{0, 0, 0};  // area emission, one-sided along the outward normal (W m^-2 sr^-1)
+  bool is_emitter() const { return radiance.x > 0 || radiance.y > 0 || radiance.z > 0; }
+};
+
+struct PointLight {
+  Vec3d position{0, 0, 0};
+  Vec3d intensity{0, 0, 0};  // W/sr
+  int medium = kVacuum;
+};
+
+// Plane wave from direction `to_sun`; the time origin is the plane Pi_0 of ptpb.md §1.
+struct DirectionalLight {
+  Vec3d to_sun{0, 0, 1};
+  Vec3d irradiance{0, 0, 0};  // W/m^2 on a plane perpendicular to to_sun
+  bool has_reference_point = false;
+  Vec3d reference_point{0, 0, 0};
+};
+
+// Mitsuba-compatible pinhole camera (look-at frame, film y downward).
+struct Camera {
+  Vec3d origin{0, 0, 0}, target{0, 0, 1}, up{0, 1, 0};
+  double fov_deg = 40.0;
+  std::string fov_axis = "x";  // x | y | diagonal | smaller | larger
+  int width = 64, height = 64;
+  int medium = kVacuum;  // medium containing the pinhole
+};
+
+enum class FrameMode { Steady, Bins, Gate };
+
+struct Film {
+  FrameMode mode = FrameMode::Steady;
+  int temporal_bins = 0;
+  double start_opl = 0.0;      // m
+  double bin_width_opl = 0.003;  // m
+};
+
+struct Scene {
+  std::vector<Medium> media;
+  std::vector<Shape> shapes;
+  std::vector<PointLight> point_lights;
+  std::vector<DirectionalLight> directional_lights;
+  Vec3d environment_radiance{0, 0, 0};  // constant sky; steady image only (no time origin)
+  double ambient_ior = 1.0;             // region index of the surroundings (kVacuum)
+  Camera camera;
+  Film film;
+};
+
+}  // namespace ptpb

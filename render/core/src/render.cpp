@@ -1,0 +1,407 @@
+// The progressive PTPB loop (ptpb.md §4–§6, §9): per iteration, trace M light paths into beams,
+// build the beam structure with R_i, trace one jittered camera path per pixel, evaluate every
+// ray–beam pair once and splat it into the steady image and every frame its kernel covers.
+#include "ptpb/render.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <thread>
+
+#include "ptpb/beam_accel.hpp"
+#include "ptpb/beam_geometry.hpp"
+#include "ptpb/beams.hpp"
+#include "ptpb/compiled_scene.hpp"
+#include "ptpb/parallel.hpp"
+#include "ptpb/rng.hpp"
+#include "ptpb/sampling.hpp"
+
+namespace ptpb {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+void validate(const RenderSettings& s) {
+  auto require = [](bool ok, const std::string& what) { if (!ok) throw std::invalid_argument(what); };
+  require(s.iterations > 0 || s.time_budget_s > 0, "iterations must be > 0 (or give time_budget_s > 0)");
+  require(std::isfinite(s.time_budget_s) && s.time_budget_s >= 0, "time_budget_s must be >= 0");
+  require(s.light_paths_per_iteration > 0 && s.light_paths_per_iteration < (1ull << 32),
+          "light_paths_per_iteration must lie in [1, 2^32)");
+  require(s.alpha > 0 && s.alpha <= 1, "alpha must lie in (0, 1]");
+  require(std::isfinite(s.initial_beam_radius) && s.initial_beam_radius > 0, "initial_beam_radius must be > 0 (m)");
+  require(std::isfinite(s.initial_time_half_width) && s.initial_time_half_width > 0,
+          "initial_time_half_width must be > 0 (m of OPL)");
+  require(s.parallel_guard_sin2 >= 0 && s.parallel_guard_sin2 < 1, "parallel_guard_sin2 must lie in [0, 1)");
+  require(s.max_depth == -1 || s.max_depth >= 1, "max_depth must be -1 or >= 1");
+  require(s.rr_depth >= 1, "rr_depth must be >= 1");
+  require(s.threads >= 0, "threads must be >= 0");
+  require(s.tile_size >= 1, "tile_size must be >= 1");
+  require(s.snapshot_every >= 0, "snapshot_every must be >= 0");
+  require(s.transmittance_cutoff > 0 && s.transmittance_cutoff < 1, "transmittance_cutoff must lie in (0, 1)");
+  require(s.dice_length >= 0, "dice_length must be >= 0");
+}
+
+struct Counters {
+  std::atomic<std::uint64_t> queries{0}, candidates{0}, pairs{0}, parallel{0}, false_positives{0};
+};
+
+// Everything one iteration's camera pass needs, read-only.
+struct CameraPass {
+  const CompiledScene* cs;
+  const RenderSettings* st;
+  const std::vector<Beam>* beams;
+  const BeamAccel* accel;
+  std::uint64_t iteration;
+  double radius, time_half_width, inv_paths;
+  Vec3d cam_origin, cam_left, cam_up, cam_forward;
+  double tan_x, tan_y, far_length;
+  // Iteration buffers (double): steady/early/late are H*W*3, frames F*H*W*3.
+  double *steady, *early, *late, *frames;
+};
+
+struct PixelSplat {
+  const CameraPass& p;
+  std::size_t pixel;
+  std::size_t frame_stride;
+
+  void add(double tau, const Vec3d& v, bool timeless) const {
+    double* s = p.steady + 3 * pixel;
+    s[0] += v.x; s[1] += v.y; s[2] += v.z;
+    const Film& film = p.cs->scene().film;
+    if (film.mode == FrameMode::Steady || timeless) return;
+    const double rel = (tau - film.start_opl) / film.bin_width_opl;
+    const int F = film.temporal_bins;
+    double* side = rel < 0 ? p.early : (rel >= F ? p.late : nullptr);
+    if (side) { side[3 * pixel] += v.x; side[3 * pixel + 1] += v.y; side[3 * pixel + 2] += v.z; }
+    if (film.mode == FrameMode::Bins) {
+      if (side) return;
+      const int k = std::min(F - 1, static_cast<int>(std::floor(rel)));
+      double* f = p.frames + k * frame_stride + 3 * pixel;
+      f[0] += v.x; f[1] += v.y; f[2] += v.z;
+      return;
+    }
+    // Gate: every frame centre within T of tau gets the temporal kernel's weight (§5).
+    const double T = p.time_half_width, dt = film.bin_width_opl;
+    const double kmin_real = std::ceil((tau - T - film.start_opl) / dt - 0.5);
+    const double kmax_real = std::floor((tau + T - film.start_opl) / dt - 0.5);
+    if (kmax_real < 0 || kmin_real >= F) return;
+    const int kmin = static_cast<int>(std::max(0.0, kmin_real));
+    const int kmax = static_cast<int>(std::min(double(F - 1), kmax_real));
+    for (int k = kmin; k <= kmax; ++k) {
+      const double tk = film.start_opl + (k + 0.5) * dt;
+      const double w = temporal_kernel(p.st->temporal_kernel, tk - tau, T);
+      if (w == 0.0) continue;
+      double* f = p.frames + k * frame_stride + 3 * pixel;
+      f[0] += w * v.x; f[1] += w * v.y; f[2] += w * v.z;
+    }
+  }
+};
+
+struct TileStats {
+  std::uint64_t queries = 0, candidates = 0, pairs = 0, parallel = 0, false_positives = 0;
+};
+
+// Beam×beam estimate along the query segment [0, t_q] of one camera segment (§4, §5).
+void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, const Vec3d& dir, double t_q,
+            int medium, const Vec3d& weight, double tau_c, int depth_c, std::vector<std::uint32_t>& cand,
+            TileStats& ts) {
+  const Scene& scene = p.cs->scene();
+  const RenderSettings& st = *p.st;
+  const Medium& m = scene.media[medium];
+  const Vec3d sigma_t = m.sigma_t();
+  const double n = m.ior;
+  cand.clear();
+  p.accel->query(pos, dir, t_q, cand);
+  ++ts.queries;
+  // Canonical order makes the sum independent of traversal and thread count (§9).
+  std::sort(cand.begin(), cand.end());
+  cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+  ts.candidates += cand.size();
+  const std::vector<Beam>& beams = *p.beams;
+  for (std::uint32_t bi : cand) {
+    const Beam& b = beams[bi];
+    if (b.medium != medium) { ++ts.false_positives; continue; }
+    if (st.max_depth >= 0 && b.light_depth + depth_c + 2 > st.max_depth) continue;
+    const ClosestApproach ca = closest_approach(pos, dir, b.origin, b.direction);
+    if (ca.sin2 < st.parallel_guard_sin2) { ++ts.parallel; continue; }
+    if (!(ca.t >= 0 && ca.t <= t_q && ca.s >= 0 && ca.s <= b.length && ca.u < p.radius)) {
+      ++ts.false_positives;
+      continue;
+    }
+    const double k_r = spatial_kernel_1d(st.spatial_kernel, ca.u, p.radius);
+    const double phase = hg_eval(dot(b.direction, -dir), m.g);
+    Vec3d tr_c = transmittance(sigma_t, ca.t);
+    if (st.query_beam_kind == BeamKind::Short) tr_c = tr_c / survival_mixture(sigma_t, ca.t);
+    Vec3d tr_b = transmittance(sigma_t, ca.s);
+    if (b.kind == BeamKind::Short) tr_b = tr_b / survival_mixture(sigma_t, ca.s);
+    const double scalar = k_r * phase / std::sqrt(ca.sin2) * p.inv_paths;
+    const Vec3d value = weight * m.sigma_s * tr_c * tr_b * b.power * scalar;
+    const double tau = b.tau0 + n * ca.s + (st.camera_unwarp ? 0.0 : n * ca.t + tau_c);
+    splat.add(tau, value, b.timeless);
+    ++ts.pairs;
+  }
+}
+
+void trace_camera_path(const CameraPass& p, int px, int py, std::vector<std::uint32_t>& cand, TileStats& ts) {
+  const CompiledScene& cs = *p.cs;
+  const Scene& scene = cs.scene();
+  const RenderSettings& st = *p.st;
+  const int W = scene.camera.width, H = scene.camera.height;
+  const std::size_t pixel = std::size_t(py) * W + px;
+  KeyedRng rng(st.seed, p.iteration, StreamDomain::CameraPixel, pixel);
+  const double jx = st.jitter ? rng.next_double() : 0.5, jy = st.jitter ? rng.next_double() : 0.5;
+  const double sx = (px + jx) / W, sy = (py + jy) / H;
+  // Mitsuba's perspective sensor: +x of camera space is "left", film y points down.
+  Vec3d dir = normalize(p.cam_left * ((1.0 - 2.0 * sx) * p.tan_x) + p.cam_up * ((1.0 - 2.0 * sy) * p.tan_y) +
+                        p.cam_forward);
+  const PixelSplat splat{p, pixel, std::size_t(W) * H * 3};
+  Vec3d pos = p.cam_origin, weight{1, 1, 1};
+  int medium = scene.camera.medium, depth_c = 0;
+  double tau_c = 0.0;
+  for (int guard = 0; guard < 100000; ++guard) {
+    const SurfaceHit hit = cs.intersect(pos, dir);
+    const double dist = hit.valid ? hit.t : std::numeric_limits<double>::infinity();
+    if (cs.scattering(medium)) {
+      const Vec3d sigma_t = scene.media[medium].sigma_t();
+      double t_q;
+      bool stop_inside = false;
+      if (st.query_beam_kind == BeamKind::Long) {
+        t_q = std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff));
+      } else {
+        const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
+        const double ts_sample = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel]
+                                                      : std::numeric_limits<double>::infinity();
+        stop_inside = ts_sample < dist;
+        t_q = std::min(ts_sample, dist);
+      }
+      if (!std::isfinite(t_q)) t_q = p.far_length;
+      if (st.max_depth < 0 || depth_c + 2 <= st.max_depth)
+        gather(p, splat, pos, dir, t_q, medium, weight, tau_c, depth_c, cand, ts);
+      if (stop_inside || !hit.valid) return;
+      weight = weight * transmittance(sigma_t, dist);
+      if (st.query_beam_kind == BeamKind::Short) weight = weight / survival_mixture(sigma_t, dist);
+    } else if (cs.attenuating(medium) && hit.valid) {
+      weight = weight * transmittance(scene.media[medium].sigma_t(), dist);
+    }
+    if (!hit.valid) {
+      // Sky seen directly: no time origin, so it only enters the steady image (§1).
+      if (max_component(scene.environment_radiance) > 0 && (st.max_depth < 0 || depth_c + 1 <= st.max_depth))
+        splat.add(0.0, weight * scene.environment_radiance, true);
+      return;
+    }
+    if (!(max_component(weight) > 0)) return;
+    tau_c += cs.ior(medium) * dist;
+    const Shape& shape = scene.shapes[hit.shape];
+    if (shape.is_emitter() && hit.entering && (st.max_depth < 0 || depth_c + 1 <= st.max_depth)) {
+      splat.add(st.camera_unwarp ? 0.0 : tau_c, weight * shape.radiance, false);
+    }
+    pos = hit.position;
+    const Vec3d facing = hit.entering ? hit.normal : -hit.normal;
+    if (shape.kind == SurfaceKind::Null) {
+      medium = hit.medium_after;
+      continue;
+    }
+    if (shape.kind == SurfaceKind::Diffuse) return;  // surface photons (§7) are not implemented
+    ++depth_c;
+    if (st.max_depth >= 0 && depth_c + 1 > st.max_depth) return;
+    const double n_i = cs.ior(medium), n_t = cs.ior(hit.medium_after);
+    const FresnelResult fr = fresnel_dielectric(-dot(dir, facing), n_i, n_t);
+    if (rng.next_double() < fr.reflectance) {
+      dir = normalize(reflect(dir, facing));
+    } else {
+      dir = refract(dir, facing, n_i, n_t, fr.cos_t);
+      weight = weight * ((n_i / n_t) * (n_i / n_t));  // radiance scaling at refraction (§3)
+      medium = hit.medium_after;
+    }
+    if (depth_c >= st.rr_depth) {
+      const double q = std::min(1.0, max_component(weight));
+      if (!(rng.next_double() < q)) return;
+      weight = weight / q;
+    }
+  }
+}
+
+}  // namespace
+
+void iteration_bandwidths(FrameMode mode, const RenderSettings& s, long iteration, double& radius,
+                          double& time_half_width) {
+  const double gamma = schedule_gamma(iteration, s.alpha);
+  if (mode == FrameMode::Gate) {
+    radius = s.initial_beam_radius * std::sqrt(gamma);
+    time_half_width = s.initial_time_half_width * std::sqrt(gamma);
+  } else {
+    radius = s.initial_beam_radius * gamma;
+    time_half_width = s.initial_time_half_width;
+  }
+}
+
+RenderResult render(const Scene& scene, const RenderSettings& settings, const ProgressCallback& progress) {
+  validate(settings);
+  const auto t_start = Clock::now();
+  const CompiledScene cs(scene);
+  const Camera& cam = scene.camera;
+  const Film& film = scene.film;
+  const int W = cam.width, H = cam.height;
+  const int F = film.mode == FrameMode::Steady ? 0 : film.temporal_bins;
+  const std::size_t px_count = std::size_t(W) * H;
+  const std::size_t frame_values = std::size_t(F) * px_count * 3;
+
+  RenderResult result;
+  result.width = W;
+  result.height = H;
+  result.frame_count = F;
+  std::vector<double> acc_steady(px_count * 3, 0.0), acc_early(px_count * 3, 0.0), acc_late(px_count * 3, 0.0);
+  std::vector<double> acc_frames(frame_values, 0.0);
+  std::vector<double> it_steady(px_count * 3), it_early(px_count * 3), it_late(px_count * 3), it_frames(frame_values);
+
+  CameraPass pass{};
+  pass.cs = &cs;
+  pass.st = &settings;
+  // Mitsuba's look_at frame: columns (left, up, forward).
+  pass.cam_forward = normalize(cam.target - cam.origin);
+  pass.cam_left = normalize(cross(cam.up, pass.cam_forward));
+  pass.cam_up = cross(pass.cam_forward, pass.cam_left);
+  pass.cam_origin = cam.origin;
+  const double aspect = double(W) / H;
+  const double tan_half = std::tan(cam.fov_deg * kPi / 360.0);
+  std::string axis = cam.fov_axis;
+  if (axis == "smaller") axis = W <= H ? "x" : "y";
+  if (axis == "larger") axis = W >= H ? "x" : "y";
+  if (axis == "x") pass.tan_x = tan_half;
+  else if (axis == "y") pass.tan_x = tan_half * aspect;
+  else pass.tan_x = tan_half * aspect / std::sqrt(1.0 + aspect * aspect);
+  pass.tan_y = pass.tan_x / aspect;
+  pass.far_length = 4.0 * cs.sphere_radius() + length(cam.origin - cs.sphere_center());
+  pass.inv_paths = 1.0 / double(settings.light_paths_per_iteration);
+  pass.steady = it_steady.data();
+  pass.early = it_early.data();
+  pass.late = it_late.data();
+  pass.frames = it_frames.data();
+
+  auto accel = make_beam_accel(settings.accel, settings.grid_resolution, settings.dice_length);
+  const std::thread::id caller = std::this_thread::get_id();
+  std::atomic<bool> cancel{false};
+  auto last_report = Clock::now();
+  Counters counters;
+  RenderStats& stats = result.stats;
+  const int tiles_x = (W + settings.tile_size - 1) / settings.tile_size;
+  const int tiles_y = (H + settings.tile_size - 1) / settings.tile_size;
+  const long max_iterations = settings.time_budget_s > 0 ? (1L << 40) : settings.iterations;
+  const std::uint64_t M = settings.light_paths_per_iteration;
+  constexpr std::size_t kPathChunk = 256;
+
+  auto report = [&](int done, double R, double T, std::uint64_t nbeams) {
+    if (!progress) return;
+    Progress pr{done, settings.time_budget_s > 0 ? -1 : settings.iterations, seconds_since(t_start), R, T, nbeams};
+    last_report = Clock::now();
+    if (!progress(pr)) cancel.store(true);
+  };
+
+  std::vector<Beam> beams;
+  for (long it = 0; it < max_iterations && !cancel.load(); ++it) {
+    if (settings.time_budget_s > 0 && it > 0 && seconds_since(t_start) >= settings.time_budget_s) break;
+    double R, T;
+    iteration_bandwidths(film.mode, settings, it, R, T);
+    if (film.mode == FrameMode::Gate) T = std::max(T, 0.0);
+
+    // 1. Light paths, in fixed chunks of path indices; beams kept in path order (§9).
+    auto t0 = Clock::now();
+    const std::size_t path_chunks = (M + kPathChunk - 1) / kPathChunk;
+    std::vector<std::vector<Beam>> chunk_beams(path_chunks);
+    parallel_for_chunks(path_chunks, 1, settings.threads, [&](std::size_t c0, std::size_t c1) {
+      for (std::size_t c = c0; c < c1; ++c) {
+        const std::uint64_t end = std::min<std::uint64_t>(M, (c + 1) * kPathChunk);
+        for (std::uint64_t j = c * kPathChunk; j < end; ++j) trace_light_path(cs, settings, it, j, chunk_beams[c]);
+      }
+    });
+    beams.clear();
+    for (auto& v : chunk_beams) beams.insert(beams.end(), v.begin(), v.end());
+    chunk_beams.clear();
+    stats.time_light_s += seconds_since(t0);
+
+    // 2. The beam structure, with this iteration's radius.
+    t0 = Clock::now();
+    accel->build(beams, R, settings.threads);
+    stats.time_build_s += seconds_since(t0);
+
+    // 3. Camera pass by tiles; each tile owns its pixels.
+    t0 = Clock::now();
+    std::fill(it_steady.begin(), it_steady.end(), 0.0);
+    std::fill(it_early.begin(), it_early.end(), 0.0);
+    std::fill(it_late.begin(), it_late.end(), 0.0);
+    std::fill(it_frames.begin(), it_frames.end(), 0.0);
+    pass.beams = &beams;
+    pass.accel = accel.get();
+    pass.iteration = static_cast<std::uint64_t>(it);
+    pass.radius = accel->radius();
+    pass.time_half_width = T;
+    parallel_for_chunks(std::size_t(tiles_x) * tiles_y, 1, settings.threads, [&](std::size_t t_begin, std::size_t t_end) {
+      std::vector<std::uint32_t> cand;
+      for (std::size_t t = t_begin; t < t_end; ++t) {
+        if (cancel.load()) return;
+        TileStats ts;
+        const int x0 = int(t % tiles_x) * settings.tile_size, y0 = int(t / tiles_x) * settings.tile_size;
+        for (int y = y0; y < std::min(H, y0 + settings.tile_size); ++y)
+          for (int x = x0; x < std::min(W, x0 + settings.tile_size); ++x) trace_camera_path(pass, x, y, cand, ts);
+        counters.queries += ts.queries;
+        counters.candidates += ts.candidates;
+        counters.pairs += ts.pairs;
+        counters.parallel += ts.parallel;
+        counters.false_positives += ts.false_positives;
+        // Only the calling thread may talk to Python (signals are delivered to the main thread).
+        if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5) report(int(it), R, T, beams.size());
+      }
+    });
+    stats.time_camera_s += seconds_since(t0);
+    if (cancel.load()) break;  // the unfinished iteration is dropped
+
+    for (std::size_t i = 0; i < acc_steady.size(); ++i) {
+      acc_steady[i] += it_steady[i];
+      acc_early[i] += it_early[i];
+      acc_late[i] += it_late[i];
+    }
+    for (std::size_t i = 0; i < frame_values; ++i) acc_frames[i] += it_frames[i];
+    stats.iterations_done = int(it + 1);
+    stats.light_paths += M;
+    stats.beams += beams.size();
+    stats.accel_references += accel->references();
+    stats.final_radius = R;
+    stats.final_time_half_width = T;
+    if (settings.snapshot_every > 0 && (it + 1) % settings.snapshot_every == 0) {
+      std::vector<float> snap(acc_steady.size());
+      for (std::size_t i = 0; i < snap.size(); ++i) snap[i] = float(acc_steady[i] / double(it + 1));
+      result.snapshots.push_back(std::move(snap));
+      result.snapshot_iterations.push_back(int(it + 1));
+    }
+    report(int(it + 1), R, T, beams.size());
+  }
+
+  stats.cancelled = cancel.load();
+  stats.queries = counters.queries;
+  stats.candidates = counters.candidates;
+  stats.pair_evaluations = counters.pairs;
+  stats.parallel_rejected = counters.parallel;
+  stats.false_positives = counters.false_positives;
+  const double inv_n = stats.iterations_done > 0 ? 1.0 / stats.iterations_done : 0.0;
+  auto to_float = [&](const std::vector<double>& src, std::vector<float>& dst, double* total) {
+    dst.resize(src.size());
+    double sum = 0.0;
+    for (std::size_t i = 0; i < src.size(); ++i) { dst[i] = float(src[i] * inv_n); sum += src[i] * inv_n; }
+    if (total) *total = sum;
+  };
+  to_float(acc_steady, result.steady, &stats.steady_total);
+  to_float(acc_early, result.early, &stats.early_total);
+  to_float(acc_late, result.late, &stats.late_total);
+  to_float(acc_frames, result.frames, nullptr);
+  stats.time_total_s = seconds_since(t_start);
+  return result;
+}
+
+}  // namespace ptpb

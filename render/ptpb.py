@@ -1,0 +1,167 @@
+"""Python face of the C++ PTPB renderer: ``render(scene, settings) -> RenderResult``.
+
+``scene`` is the core's plain scene dict (all lengths in metres, colours linear RGB)::
+
+    {"media": [{"sigma_s": (3,), "sigma_a": (3,), "g": float, "ior": float}, ...],
+     "shapes": [{"vertices": (N,3), "faces": (M,3), "kind": "null"|"dielectric"|"diffuse",
+                 "interior": medium id or -1, "exterior": medium id or -1,
+                 "albedo": (3,), "radiance": (3,)  # one-sided area emission along the outward normal
+                }, ...],
+     "point_lights": [{"position", "intensity" (W/sr), "medium"}],
+     "directional_lights": [{"to_sun", "irradiance" (W/m^2), "reference_point" or None}],
+     "environment_radiance": (3,),  # constant sky, steady image only
+     "ambient_ior": 1.0,
+     "camera": {"origin", "target", "up", "fov" (deg), "fov_axis", "width", "height", "medium"},
+     "film": {"frame_mode": "steady"|"bins"|"gate", "temporal_bins", "start_opl" (m), "bin_width_opl" (m)}}
+
+Free flights sample the channel-average mixture of the three exponentials and carry all three
+channels (no hero wavelength), as in ptpb.md §3.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from pipeline.schema.ptpb import PTPBConfig
+
+__all__ = ["RenderResult", "render", "resolve_settings", "scene_bounding_sphere"]
+
+
+@dataclass
+class RenderResult:
+    """Images of one render: ``steady`` (H, W, 3) radiance, ``frames`` (F, H, W, 3) float32
+    (bins: W m^-2 sr^-1 per bin; gate: per metre of OPL), energy outside the window, stats."""
+
+    steady: np.ndarray
+    frames: np.ndarray
+    early: np.ndarray
+    late: np.ndarray
+    stats: dict[str, Any]
+    snapshots: list[tuple[int, np.ndarray]] = field(default_factory=list)
+
+
+def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:
+    """Centre and radius of the bounding sphere of the shapes' axis-aligned box (as Mitsuba builds it)."""
+    pts = [np.asarray(s["vertices"], dtype=np.float64).reshape(-1, 3) for s in scene.get("shapes", [])]
+    if not pts:
+        return np.zeros(3), 1.0
+    allp = np.concatenate(pts)
+    lo, hi = allp.min(0), allp.max(0)
+    centre = 0.5 * (lo + hi)
+    return centre, float(max(np.linalg.norm(hi - centre), 1e-4))
+
+
+def _tan_half_fov_x(cam: dict) -> float:
+    w, h = cam["width"], cam["height"]
+    t = math.tan(math.radians(cam["fov"]) / 2)
+    axis = cam.get("fov_axis", "x")
+    if axis == "smaller":
+        axis = "x" if w <= h else "y"
+    if axis == "larger":
+        axis = "x" if w >= h else "y"
+    aspect = w / h
+    if axis == "x":
+        return t
+    if axis == "y":
+        return t * aspect
+    return t * aspect / math.sqrt(1 + aspect * aspect)
+
+
+def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
+    """Turn a PTPBConfig into the core's settings dict: units resolved to metres (ptpb.md §6)."""
+    film = scene["film"]
+    mode = cfg.frame_mode or film["frame_mode"]
+    alpha = cfg.alpha if cfg.alpha is not None else (2.0 / 3.0 if mode == "gate" else 0.8)
+    centre, radius = scene_bounding_sphere(scene)
+    cam = scene["camera"]
+    r = cfg.initial_beam_radius
+    if r.unit == "m":
+        r0 = r.value
+    elif r.unit == "scene_radius":
+        r0 = r.value * radius
+    else:
+        depth = float(np.linalg.norm(centre - np.asarray(cam["origin"], dtype=np.float64))) or radius
+        footprint = 2 * depth * _tan_half_fov_x(cam) / cam["width"]
+        r0 = r.value * footprint
+    n = max([m.get("ior", 1.0) for m in scene.get("media", [])] + [scene.get("ambient_ior", 1.0)])
+    bin_width = film.get("bin_width_opl", 0.003)
+    t = cfg.initial_time_half_width
+    if t.unit == "m_opl":
+        t0 = t.value
+    elif t.unit == "bin_width":
+        t0 = t.value * bin_width
+    else:
+        t0 = t.value * n * r0
+    t0 = max(t0, 0.5 * bin_width)
+    return {
+        "iterations": cfg.iterations,
+        "time_budget_s": cfg.time_budget_s or 0.0,
+        "light_paths_per_iteration": cfg.light_paths_per_iteration,
+        "alpha": alpha,
+        "initial_beam_radius": r0,
+        "initial_time_half_width": t0,
+        "spatial_kernel": cfg.spatial_kernel,
+        "temporal_kernel": cfg.temporal_kernel,
+        "photon_beam_kind": cfg.photon_beam_kind,
+        "query_beam_kind": cfg.query_beam_kind,
+        "parallel_guard_sin2": cfg.parallel_guard_sin2,
+        "max_depth": cfg.max_depth,
+        "rr_depth": cfg.rr_depth,
+        "seed": cfg.seed,
+        "threads": cfg.threads,
+        "accel": cfg.accel,
+        "grid_resolution": cfg.grid_resolution,
+        "transmittance_cutoff": cfg.transmittance_cutoff,
+        "camera_unwarp": cfg.camera_unwarp,
+        "snapshot_every": cfg.snapshot_every,
+    }
+
+
+def render(
+    scene: dict,
+    settings: PTPBConfig | dict,
+    *,
+    progress: bool | Callable[[dict], Optional[bool]] = False,
+    **overrides: Any,
+) -> RenderResult:
+    """Render ``scene`` (the core dict above) with ``settings`` (a PTPBConfig, or a core settings
+    dict with R_0/T_0 already in metres). ``overrides`` replace core settings keys (e.g. jitter).
+    ``progress=True`` shows a tqdm bar; a callable receives the core's progress dicts.
+    Ctrl-C stops after the last complete iteration; ``stats["interrupted"]`` tells."""
+    from render import _core
+
+    scene = dict(scene)
+    if isinstance(settings, PTPBConfig):
+        core_settings = resolve_settings(scene, settings)
+        if settings.frame_mode is not None:
+            scene["film"] = {**scene["film"], "frame_mode": settings.frame_mode}
+    else:
+        core_settings = dict(settings)
+    core_settings.update(overrides)
+    bar = None
+    callback = progress if callable(progress) else None
+    if progress is True:
+        from tqdm import tqdm
+
+        budget = core_settings.get("time_budget_s", 0.0)
+        bar = tqdm(total=None if budget else core_settings.get("iterations"), unit="it", desc="ptpb", leave=False)
+
+        def callback(info: dict) -> bool:
+            bar.n = info["iteration"]
+            bar.set_postfix(R=f"{info['radius']:.3g}", beams=info["beams"], refresh=False)
+            bar.refresh()
+            return True
+
+    try:
+        out = _core.ptpb_render(scene, core_settings, callback)
+    finally:
+        if bar is not None:
+            bar.close()
+    stats = dict(out["stats"])
+    stats["initial_beam_radius_m"] = core_settings["initial_beam_radius"]
+    stats["initial_time_half_width_m"] = core_settings.get("initial_time_half_width", core_settings["initial_beam_radius"])
+    stats["alpha"] = core_settings.get("alpha", 0.8)
+    return RenderResult(out["steady"], out["frames"], out["early"], out["late"], stats, list(out["snapshots"]))

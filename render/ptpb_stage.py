@@ -1,0 +1,88 @@
+"""The `render` stage: run our PTPB renderer on a scene folder and write its outputs.
+
+Outputs in ``out_dir``: ``steady.exr`` and ``steady.npy`` (H, W, 3), ``frames.npy`` (F, H, W, 3)
+float32, and ``stats.json`` (run statistics, resolved R_0/T_0, film and time conventions).
+"""
+from __future__ import annotations
+
+import importlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.atomic import atomic_path, save_npy_atomic, write_json_atomic
+from pipeline.schema.ptpb import PTPBConfig
+from render.ptpb import render
+
+
+def _load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    if path.suffix == ".npz":
+        with np.load(path) as z:
+            return np.asarray(z["vertices"], np.float32), np.asarray(z["faces"], np.uint32)
+    if path.suffix == ".ply":
+        ply = importlib.import_module("render.ply")  # written by the scene module's owner
+        mesh = ply.read_ply(path)
+        return np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.uint32)
+    raise ValueError(f"{path}: meshes must be .npz (vertices, faces) or .ply")
+
+
+def load_core_scene(scene_dir: Path) -> dict:
+    """Read ``scene_dir/ptpb_scene.json`` (the core dict of render/ptpb.py; shapes may name a
+    ``mesh`` file relative to the folder instead of inline vertices/faces)."""
+    path = scene_dir / "ptpb_scene.json"
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found: the scene stage must write the PTPB scene description there")
+    scene = json.loads(path.read_text())
+    for i, shape in enumerate(scene.get("shapes", [])):
+        if "mesh" in shape:
+            v, f = _load_mesh(scene_dir / shape.pop("mesh"))
+            shape["vertices"], shape["faces"] = v, f
+        elif "vertices" not in shape:
+            raise ValueError(f"{path}: shapes[{i}] needs 'mesh' or 'vertices'/'faces'")
+    return scene
+
+
+def _write_exr(path: Path, image: np.ndarray) -> None:
+    try:
+        exr = importlib.import_module("render.exr")
+        exr.write_exr(path, image)
+        return
+    except ModuleNotFoundError:
+        pass
+    import OpenImageIO as oiio
+
+    with atomic_path(path) as tmp:
+        spec = oiio.ImageSpec(image.shape[1], image.shape[0], 3, oiio.FLOAT)
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise RuntimeError(f"cannot write {path}: {oiio.geterror()}")
+        out.write_image(np.ascontiguousarray(image, dtype=np.float32))
+        out.close()
+
+
+def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: int, threads: int,
+                     quiet: bool = False) -> dict:
+    """Render the scene in ``scene_dir`` with ``cfg`` (seed and threads override the config's)."""
+    scene = load_core_scene(Path(scene_dir))
+    cfg = cfg.model_copy(update={"seed": seed, "threads": threads})
+    result = render(scene, cfg, progress=not quiet)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _write_exr(out_dir / "steady.exr", result.steady)
+    save_npy_atomic(out_dir / "steady.npy", result.steady)
+    save_npy_atomic(out_dir / "frames.npy", result.frames)
+    film = scene["film"]
+    stats = {
+        **{k: (v.item() if hasattr(v, "item") else v) for k, v in result.stats.items()},
+        "frame_mode": cfg.frame_mode or film["frame_mode"],
+        "temporal_bins": film.get("temporal_bins", 0),
+        "start_opl_m": film.get("start_opl", 0.0),
+        "bin_width_opl_m": film.get("bin_width_opl", 0.003),
+        "frame_units": "W m^-2 sr^-1 per bin" if (cfg.frame_mode or film["frame_mode"]) == "bins"
+        else "W m^-2 sr^-1 per metre of OPL",
+        "camera_leg_included": not cfg.camera_unwarp,
+        "config": cfg.model_dump(),
+    }
+    write_json_atomic(out_dir / "stats.json", stats)
+    return stats
