@@ -4,6 +4,7 @@ from __future__ import annotations
 from pydantic import Field
 
 from pipeline.schema.base import StrictModel
+from pipeline.schema.geometry import GeometryConfig
 
 
 class Config(StrictModel):
@@ -17,6 +18,7 @@ class Config(StrictModel):
     seed: int = Field(1, ge=0, le=2**63 - 1, description="Seed of every random stream of the run [-].")
     threads: int = Field(0, ge=0, le=1024, description="Worker threads for the C++ core; 0 uses every core [-].")
     runs_dir: str = Field("runs", min_length=1, description="Folder that holds run outputs, relative to the working directory [path].")
+    geometry: GeometryConfig = Field(default_factory=GeometryConfig, description="The geometry stage: growing and meshing the field.")
 
 
 __all__ = ["Config", "StrictModel"]

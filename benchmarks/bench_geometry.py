@@ -1,0 +1,69 @@
+"""Geometry-stage time against grid size (128^2, 256^2, 512^2): growth + mesh + metrics.
+
+Run: .venv/bin/python benchmarks/bench_geometry.py
+Writes benchmarks/results/geometry.csv and geometry.md. The 128^2 row is the demo setting
+(Tapado defaults, 40 days). Larger grids keep the demo's 6.25 cm spacing on a larger domain and
+simulate fewer days to keep the run to a few minutes; per-day time is the comparable column.
+Pictures are excluded (their cost does not depend on the grid: ~4 s).
+"""
+from __future__ import annotations
+
+import csv
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from geometry import ablation, mesh, metrics  # noqa: E402
+from pipeline.atomic import write_text_atomic  # noqa: E402
+from pipeline.schema.geometry import GeometryConfig  # noqa: E402
+
+CASES = [(128, 40), (256, 4), (512, 1)]  # (grid cells per side, simulated days)
+
+
+def bench(cells: int, days: int) -> dict:
+    cfg = GeometryConfig(grid_cells=cells, domain_size=cells * 0.0625, days=days, snapshots=2)
+    rng = np.random.default_rng(1)
+    t0 = time.perf_counter()
+    h0 = ablation.initial_height_field(cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
+    grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
+    t1 = time.perf_counter()
+    solid = mesh.decimate(mesh.heightfield_solid(grown.height, cfg.spacing, cfg.base_thickness), cfg.max_triangles)
+    mesh.manifold_volume(solid)
+    t2 = time.perf_counter()
+    metrics.morphology(grown.height, cfg.spacing)
+    t3 = time.perf_counter()
+    return {"grid": f"{cells}^2", "days": days, "growth_s": t1 - t0, "per_day_s": (t1 - t0) / days,
+            "horizons_s": grown.timings["horizons_s"], "mesh_s": t2 - t1, "metrics_s": t3 - t2,
+            "total_s": t3 - t0, "triangles": len(solid.faces)}
+
+
+def main() -> None:
+    rows = []
+    for cells, days in CASES:
+        row = bench(cells, days)
+        rows.append(row)
+        print(f"{row['grid']:>6}  {days:3d} days  growth {row['growth_s']:7.2f} s ({row['per_day_s']:.2f} s/day, "
+              f"horizons {row['horizons_s']:.2f} s)  mesh {row['mesh_s']:.2f} s  total {row['total_s']:.2f} s", flush=True)
+    out = Path(__file__).resolve().parent / "results"
+    out.mkdir(exist_ok=True)
+    keys = list(rows[0])
+    lines = [",".join(keys)] + [",".join(f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]) for k in keys) for r in rows]
+    write_text_atomic(out / "geometry.csv", "\n".join(lines) + "\n")
+    md = ["# Geometry stage: time against grid size", "",
+          f"Machine: {os.cpu_count()} cores (shared). Spacing 6.25 cm, Tapado defaults; 256^2 and 512^2 simulate "
+          "fewer days (compare s/day). Growth + mesh + metrics; pictures excluded (~4 s, grid-independent).", "",
+          "| grid | days | growth [s] | per day [s] | horizons [s] | mesh [s] | metrics [s] | total [s] | triangles |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    md += [f"| {r['grid']} | {r['days']} | {r['growth_s']:.2f} | {r['per_day_s']:.2f} | {r['horizons_s']:.2f} | "
+           f"{r['mesh_s']:.2f} | {r['metrics_s']:.2f} | {r['total_s']:.2f} | {r['triangles']} |" for r in rows]
+    write_text_atomic(out / "geometry.md", "\n".join(md) + "\n")
+    print("\n".join(md[4:]))
+
+
+if __name__ == "__main__":
+    main()

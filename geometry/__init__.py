@@ -1,0 +1,1 @@
+"""Penitente fields grown from ablation physics, meshed as watertight solids (metres; x = east, y = north, z = up)."""

@@ -1,0 +1,112 @@
+"""The geometry stage: grow a penitente field, mesh it watertight, measure it and draw it.
+
+Outputs in ``out_dir`` (all metres, x = east, y = north, z = up): heightfield.npz,
+penitentes.ply, metrics.json, metrics.png, preview.png, hillshade.png, timelapse.mp4.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from geometry import ablation, irradiance, metrics, mesh, preview, sunpath
+from pipeline.atomic import atomic_path, write_json_atomic
+from pipeline.schema.geometry import GeometryConfig
+
+log = logging.getLogger(__name__)
+
+
+def noon_radiation_metrics(h: np.ndarray, spacing: float, cfg: GeometryConfig, day_of_year: float) -> dict:
+    """Field albedo at local noon against flat snow/ice of the same local albedo (V4)."""
+    delta = float(sunpath.declination(day_of_year))
+    sun = sunpath.sun_vector(cfg.latitude, delta, 0.0)
+    elevation = float(np.arcsin(sun[2]))
+    sky = ablation.Sky(cfg.direct_normal_irradiance, cfg.optical_depth, cfg.diffuse_fraction)
+    s_b, s_d = sky.direct_normal(elevation), sky.diffuse_horizontal(elevation)
+    horizons = irradiance.compute_horizons(h, spacing, max(cfg.azimuths, 24))
+    budget = irradiance.radiation_budget(h, spacing, sun, s_b, s_d, cfg.albedo, horizons, max(cfg.bounces, 3))
+    albedo, closure = irradiance.field_albedo(h, spacing, budget, horizons, s_b * np.sin(elevation) + s_d)
+    return {
+        "field_albedo": albedo, "flat_albedo": cfg.albedo, "albedo_difference": albedo - cfg.albedo,
+        "albedo_energy_closure": closure, "noon_sun_elevation_deg": float(np.degrees(elevation)),
+        "mean_sky_view": float(horizons.sky_view.mean()),
+    }
+
+
+def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: bool = False) -> dict:
+    """Grow, mesh, measure and draw one field; returns a small JSON-able summary."""
+    from tqdm import tqdm
+
+    out_dir = Path(out_dir)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    spacing = cfg.spacing
+    h0 = ablation.initial_height_field(cfg.grid_cells, spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
+    settings = ablation.settings_from_config(cfg)
+    log.info("growing a %d^2 field of %.3g m for %d days at %.1f deg latitude", cfg.grid_cells, cfg.domain_size,
+             cfg.days, cfg.latitude)
+    with tqdm(total=cfg.days, desc="geometry: growing", unit="day", disable=quiet, leave=False) as bar:
+        grown = ablation.grow_field(h0, spacing, settings, rng, progress=bar.update)
+    h = grown.height
+    timings["growth_s"] = time.perf_counter() - t0
+    timings.update({f"growth_{k}": v for k, v in grown.timings.items()})
+
+    t = time.perf_counter()
+    with atomic_path(out_dir / "heightfield.npz") as tmp:
+        np.savez_compressed(tmp, height=h, spacing=spacing, snapshots=grown.snapshots.astype(np.float32),
+                            snapshot_days=grown.snapshot_days, relief_history=grown.relief_history,
+                            sky_view=grown.sky_view, melt_fraction=grown.melt, initial_height=h0)
+    solid = mesh.heightfield_solid(h, spacing, cfg.base_thickness, cfg.mesh_tiles)
+    full_triangles = len(solid.faces)
+    solid = mesh.decimate(solid, cfg.max_triangles)
+    volume = mesh.manifold_volume(solid)
+    expected = mesh.height_integral_volume(h, spacing, cfg.base_thickness, cfg.mesh_tiles)
+    if abs(volume - expected) > 0.01 * expected:
+        raise ValueError(f"mesh volume {volume:.4g} m3 differs from the height integral {expected:.4g} m3 by more "
+                         "than 1 %; raise geometry.max_triangles")
+    mesh.write_ply(out_dir / "penitentes.ply", solid,
+                   comment="penitente field: metres, x east, y north, z up; mean surface at z = 0")
+    timings["mesh_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    last_day = cfg.start_day_of_year + cfg.days - 1
+    summary_metrics = metrics.morphology(h, spacing)
+    delta = float(sunpath.declination(last_day))
+    summary_metrics["noon_zenith_angle_deg"] = float(np.degrees(sunpath.noon_zenith_angle(cfg.latitude, delta)))
+    summary_metrics["lean_toward_equator_deg"] = (summary_metrics["lean_north_deg"] if cfg.latitude < 0
+                                                  else -summary_metrics["lean_north_deg"])
+    summary_metrics.update(noon_radiation_metrics(h, spacing, cfg, last_day))
+    summary_metrics.update({
+        "initial_relief_m": float(2 * np.sqrt(2) * h0.std()), "mean_lowering_m": float(-(h.mean() - h0.mean())),
+        "melt_fraction_mean": float(grown.melt.mean()), "slope_clamp_fraction": grown.clamp_fraction,
+        "max_change_per_frozen_period_m": grown.max_daily_change, "grid_spacing_m": spacing,
+        "triangles": int(len(solid.faces)), "triangles_before_decimation": full_triangles,
+        "mesh_volume_m3": volume, "height_integral_volume_m3": expected,
+    })
+    write_json_atomic(out_dir / "metrics.json", {"metrics": summary_metrics, "timings_s": timings,
+                                                  "relief_history_m": (2 * np.sqrt(2) * grown.relief_history).tolist()})
+    timings["metrics_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    preview.save_metrics_plot(out_dir / "metrics.png", h, spacing, grown.relief_history, summary_metrics)
+    preview.save_hillshade(out_dir / "hillshade.png", h, spacing, cfg.preview_size,
+                           f"grown field, {cfg.latitude:.1f}° lat, {cfg.days} days (north up)")
+    noon_sun = sunpath.sun_vector(cfg.latitude, delta, 0.0)
+    preview.render_preview(out_dir / "preview.png", solid, noon_sun, cfg.preview_size,
+                           f"penitentes, {cfg.latitude:.1f}° lat, day {cfg.days}; arrow: noon sun")
+    preview.save_timelapse(out_dir / "timelapse.mp4", grown.snapshots, grown.snapshot_days, spacing, cfg.timelapse_fps)
+    timings["pictures_s"] = time.perf_counter() - t
+    timings["total_s"] = time.perf_counter() - t0
+    write_json_atomic(out_dir / "metrics.json", {"metrics": summary_metrics, "timings_s": timings,
+                                                  "relief_history_m": (2 * np.sqrt(2) * grown.relief_history).tolist()})
+    log.info("geometry: relief %.2f m, wavelength %.2f m, %d triangles in %.1f s", summary_metrics["relief_m"],
+             summary_metrics["dominant_wavelength_m"], len(solid.faces), timings["total_s"])
+    return {
+        "relief_m": summary_metrics["relief_m"], "dominant_wavelength_m": summary_metrics["dominant_wavelength_m"],
+        "ridge_deviation_from_east_west_deg": summary_metrics["ridge_deviation_from_east_west_deg"],
+        "lean_north_deg": summary_metrics["lean_north_deg"], "field_albedo": summary_metrics["field_albedo"],
+        "triangles": int(len(solid.faces)), "timings_s": {k: round(v, 3) for k, v in timings.items()},
+    }

@@ -1,0 +1,89 @@
+"""Where the sun is: declination, hour angle, and the sun's unit vector in the local frame.
+
+Frame: x = east, y = north, z = up (metres elsewhere, unit vectors here). Latitude is negative in
+the southern hemisphere; azimuths are clockwise from north (east = 90 deg). Formulas follow
+penitentes.md section 3.2 (Cooper 1969 declination).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SECONDS_PER_DAY = 86400.0
+
+
+def declination(day_of_year: float | np.ndarray) -> np.ndarray:
+    """Solar declination [rad] on a day of the year (1 = 1 January), Cooper's formula."""
+    return np.radians(23.45) * np.sin(2.0 * np.pi * (284.0 + np.asarray(day_of_year, float)) / 365.0)
+
+
+def sun_vector(latitude: float, declination_rad: float | np.ndarray, hour_angle: float | np.ndarray) -> np.ndarray:
+    """Unit vector toward the sun (east, north, up), shape (..., 3).
+
+    latitude [deg], declination_rad [rad], hour_angle [rad] (0 at solar noon, positive afternoon).
+    """
+    phi = np.radians(latitude)
+    delta = np.asarray(declination_rad, float)
+    omega = np.asarray(hour_angle, float)
+    east = -np.cos(delta) * np.sin(omega)
+    north = np.cos(phi) * np.sin(delta) - np.sin(phi) * np.cos(delta) * np.cos(omega)
+    up = np.sin(phi) * np.sin(delta) + np.cos(phi) * np.cos(delta) * np.cos(omega)
+    return np.stack(np.broadcast_arrays(east, north, up), axis=-1)
+
+
+def elevation_azimuth(sun: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Elevation [rad] above the horizon and azimuth [rad, clockwise from north] of sun vectors (..., 3)."""
+    sun = np.asarray(sun, float)
+    elevation = np.arcsin(np.clip(sun[..., 2], -1.0, 1.0))
+    azimuth = np.mod(np.arctan2(sun[..., 0], sun[..., 1]), 2.0 * np.pi)
+    return elevation, azimuth
+
+
+def daylight_half_angle(latitude: float, declination_rad: float) -> float:
+    """Hour angle of sunset [rad]: 0 in polar night, pi in polar day."""
+    x = -np.tan(np.radians(latitude)) * np.tan(declination_rad)
+    return float(np.arccos(np.clip(x, -1.0, 1.0)))
+
+
+def noon_zenith_angle(latitude: float, declination_rad: float) -> float:
+    """Solar zenith angle at local noon [rad]: |latitude - declination|."""
+    return abs(np.radians(latitude) - declination_rad)
+
+
+@dataclass(frozen=True)
+class DailySun:
+    """Sun positions that sample one day's daylight, each standing for an equal share of it."""
+
+    vectors: np.ndarray  # (n, 3) unit vectors toward the sun (east, north, up)
+    durations: np.ndarray  # (n,) seconds of daylight each position stands for [s]
+    hour_angles: np.ndarray  # (n,) [rad]
+    declination: float  # [rad]
+
+    @property
+    def elevations(self) -> np.ndarray:
+        return elevation_azimuth(self.vectors)[0]
+
+    @property
+    def azimuths(self) -> np.ndarray:
+        return elevation_azimuth(self.vectors)[1]
+
+
+def daily_sun_positions(latitude: float, day_of_year: float, positions_per_day: int) -> DailySun:
+    """Sample the daylight of one day at ``positions_per_day`` hour angles, evenly spaced.
+
+    Midpoint sampling keeps every position above the horizon; each stands for daylight/n seconds.
+    """
+    if positions_per_day < 1:
+        raise ValueError(f"geometry.sun_positions_per_day must be at least 1, got {positions_per_day}")
+    delta = float(declination(day_of_year))
+    half = daylight_half_angle(latitude, delta)
+    if half <= 0.0:
+        empty = np.zeros((0,))
+        return DailySun(np.zeros((0, 3)), empty, empty, delta)
+    step = 2.0 * half / positions_per_day
+    hour_angles = -half + step * (np.arange(positions_per_day) + 0.5)
+    vectors = sun_vector(latitude, delta, hour_angles)
+    durations = np.full(positions_per_day, step / (2.0 * np.pi) * SECONDS_PER_DAY)
+    keep = vectors[:, 2] > 0.0
+    return DailySun(vectors[keep], durations[keep], hour_angles[keep], delta)

@@ -1,0 +1,102 @@
+"""Settings of the geometry stage: site and sun, snow/ice, ablation model, numerics, mesh, pictures.
+
+Defaults describe Tapado Glacier, Chile (30.1 deg S) from 25 Nov for 40 days on a demo-sized grid;
+site presets in configs/presets/sites/ override them. Symbols follow penitentes.md section 4.
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from pipeline.schema.base import StrictModel
+
+
+class GeometryConfig(StrictModel):
+    """How a penitente field is grown, meshed and pictured (key path geometry.<field>)."""
+
+    # Site and season
+    latitude: float = Field(-30.1, ge=-89.0, le=89.0, description="Site latitude phi, negative south [deg].")
+    start_day_of_year: int = Field(329, ge=1, le=366, description="First simulated day (1 = 1 January; 329 = 25 Nov) [day].")
+    days: int = Field(40, ge=1, le=400, description="Simulated days of sun [day].")
+    sun_positions_per_day: int = Field(12, ge=1, le=96, description="Sun positions sampling each day's daylight [-].")
+    horizon_refreshes_per_day: int = Field(
+        1, ge=1, le=24, description="Horizon/sky-view recomputations per day; geometry is frozen in between [-]."
+    )
+    direct_normal_irradiance: float = Field(
+        1000.0, gt=0, le=1400, description="Clear-sky direct normal irradiance S_b with the sun at the zenith [W m-2]."
+    )
+    optical_depth: float = Field(
+        0.08, ge=0, le=2, description="Broadband extinction per extra air mass, S_b(e) = S_b exp(-tau (1/sin e - 1)) [-]."
+    )
+    diffuse_fraction: float = Field(
+        0.07, ge=0, le=1, description="Diffuse sky on a level surface as a fraction of S_b sin(e), S_d [-]."
+    )
+
+    # Material
+    albedo: float = Field(0.55, gt=0, lt=1, description="Local broadband albedo a of a flat patch (snow 0.8, glacier ice 0.55) [-].")
+    density: float = Field(880.0, ge=50, le=917, description="Bulk density rho (snow 350-600, ice 830-917) [kg m-3].")
+
+    # Ablation model
+    ablation_efficiency: float = Field(
+        0.5, gt=0, le=1, description="Fraction eps of absorbed shortwave spent on ablation [-]."
+    )
+    melt_enabled: bool = Field(True, description="Lliboutry switch on; false = sublimation only (cold lab, planets) [-].")
+    switch_proxy: Literal["sky_view", "openness"] = Field(
+        "sky_view", description="Sheltering proxy of the switch: the facet's sky view factor, or the sky view of a level receiver [-]."
+    )
+    switch_centre: float = Field(0.7, gt=0, lt=1, description="Switch centre V_c: below it cells start to melt [-].")
+    switch_width: float = Field(0.2, gt=0, le=1, description="Switch width dV: melt is complete at V_c - dV [-].")
+    diffusivity: float = Field(2e-9, ge=0, le=1e-5, description="Diffusive regulariser D [m2 s-1].")
+    hyperdiffusivity: float = Field(0.0, ge=0, le=1e-8, description="Fourth-order regulariser K [m4 s-1].")
+    scattered_light_coefficient: float = Field(
+        0.0, ge=0, le=1e-5,
+        description="Betterton kernel coefficient A_B = 0.5 F/(rho L) at the reference flux; 0 = off [m s-1].",
+    )
+    scattered_light_reference_flux: float = Field(
+        1000.0, gt=0, description="Horizontal flux F at which A_B applies; it scales with the actual flux [W m-2]."
+    )
+    max_slope_deg: float = Field(85.0, gt=45, lt=90, description="Slope clamp of the height field (overhang limit) [deg].")
+
+    # Grid, initial state and numerics
+    grid_cells: int = Field(128, ge=16, le=2048, description="Cells per side of the periodic square grid N [-].")
+    domain_size: float = Field(8.0, gt=0, le=1e4, description="Side L of the periodic domain [m].")
+    initial_roughness_rms: float = Field(0.05, gt=0, description="RMS height of the seeded noise [m].")
+    initial_wavelength: float = Field(0.5, gt=0, description="Wavelength at the centre of the seeded noise band [m].")
+    azimuths: int = Field(16, ge=8, le=64, description="Horizon azimuths M [-].")
+    bounces: int = Field(2, ge=0, le=8, description="Terrain-reflection (radiosity) bounces n_b [-].")
+    cfl: float = Field(0.5, gt=0, le=1, description="Hamilton-Jacobi CFL number of the recession sub-steps [-].")
+    snapshots: int = Field(24, ge=2, le=400, description="Height-field snapshots kept for the time-lapse [-].")
+
+    # Mesh
+    base_thickness: float = Field(2.0, gt=0, description="Solid below the deepest trough (>= 5 e-folding depths) [m].")
+    max_triangles: int = Field(
+        60000, ge=1000, le=20_000_000, description="Triangle budget of the PLY; larger meshes are decimated [-]."
+    )
+    mesh_tiles: int = Field(1, ge=1, le=8, description="Periodic copies of the field per side in the mesh [-].")
+
+    # Pictures
+    preview_size: int = Field(800, ge=128, le=4096, description="Width of preview.png and hillshade.png [px].")
+    timelapse_fps: int = Field(8, ge=1, le=60, description="Frame rate of timelapse.mp4 [frames/s].")
+
+    @property
+    def spacing(self) -> float:
+        """Grid spacing [m]."""
+        return self.domain_size / self.grid_cells
+
+    @model_validator(mode="after")
+    def _check_resolution(self) -> "GeometryConfig":
+        spacing = self.domain_size / self.grid_cells
+        if self.initial_wavelength < 4 * spacing:
+            raise ValueError(
+                f"geometry.initial_wavelength ({self.initial_wavelength} m) must span at least 4 cells "
+                f"({4 * spacing:.4g} m); raise it or raise geometry.grid_cells"
+            )
+        if self.initial_wavelength > self.domain_size / 2:
+            raise ValueError(
+                f"geometry.initial_wavelength ({self.initial_wavelength} m) must fit twice in "
+                f"geometry.domain_size ({self.domain_size} m)"
+            )
+        if self.switch_width > self.switch_centre:
+            raise ValueError("geometry.switch_width must not exceed geometry.switch_centre")
+        return self

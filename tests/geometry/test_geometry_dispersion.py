@@ -1,0 +1,89 @@
+"""V1 (penitentes.md 7): linear dispersion of the Betterton-type kernel with diffusion.
+
+sigma(k) = A_B |k| - D k^2, lambda* = 4 pi D / A_B = 4.40 cm for A_B = 7.14e-7 m/s, D = 2.5e-9 m2/s.
+The 1-D run uses the real-space quadrature (not the spectral shortcut), so it tests the kernel.
+Reduced grids: 256 cells over 8 lambda* (1-D) and 128^2 over 16 lambda* (2-D); the physics is linear
+and scale-free at these amplitudes, so nothing is lost.
+"""
+import numpy as np
+import pytest
+
+from geometry import ablation, metrics
+
+A_B = 7.14e-7  # [m s-1]
+D = 2.5e-9  # [m2 s-1]
+LAMBDA_STAR = 4 * np.pi * D / A_B
+SIGMA_STAR = A_B**2 / (4 * D)
+
+
+def test_quadrature_reproduces_minus_abs_k_h():
+    n, wavelength = 200, 0.05
+    spacing = wavelength / 25
+    x = np.arange(n) * spacing
+    k = 2 * np.pi / wavelength
+    h = 1e-5 * np.cos(k * x)
+    intensity = ablation.betterton_intensity_1d(h, spacing, periods=8)
+    np.testing.assert_allclose(intensity, -k * h, rtol=0, atol=0.01 * k * 1e-5)
+
+
+def _grow_1d(h, spacing, duration, dt):
+    """Strang splitting: exact diffusion half steps around an RK4 step of the quadrature kernel."""
+    kx = 2 * np.pi * np.fft.fftfreq(h.size, d=spacing)
+    half = np.exp(-D * kx**2 * dt / 2)
+    rate = lambda y: -A_B * ablation.betterton_intensity_1d(y, spacing)
+    for _ in range(int(round(duration / dt))):
+        h = np.real(np.fft.ifft(np.fft.fft(h) * half))
+        k1 = rate(h)
+        k2 = rate(h + dt / 2 * k1)
+        k3 = rate(h + dt / 2 * k2)
+        k4 = rate(h + dt * k3)
+        h = h + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        h = np.real(np.fft.ifft(np.fft.fft(h) * half))
+    return h
+
+
+def test_growth_rates_fit_dispersion_relation_and_lambda_star():
+    n = 256
+    length = 8 * LAMBDA_STAR
+    spacing = length / n
+    x = np.arange(n) * spacing
+    modes = np.array([3, 4, 5, 6, 8, 10, 12, 14])  # lambda from 11.7 cm to 2.5 cm (cut-off 2.2 cm)
+    rng = np.random.default_rng(0)
+    amplitude = 1e-6  # [m], far below 1e-3 lambda
+    h = sum(amplitude * np.cos(2 * np.pi * m * x / length + rng.uniform(0, 2 * np.pi)) for m in modes)
+    duration, samples = 3.0 / SIGMA_STAR, 4  # three e-folding times of the fastest mode
+    times, amplitudes = [0.0], [np.abs(np.fft.rfft(h))[modes]]
+    for i in range(samples):
+        h = _grow_1d(h, spacing, duration / samples, dt=duration / samples / 24)
+        times.append(duration * (i + 1) / samples)
+        amplitudes.append(np.abs(np.fft.rfft(h))[modes])
+    log_amp = np.log(np.array(amplitudes))
+    measured = np.polyfit(np.array(times), log_amp, 1)[0]
+    k = 2 * np.pi * modes / length
+    expected = ablation.linear_growth_rate(k, A_B, D)
+    assert np.all(np.abs(measured - expected) <= 0.05 * SIGMA_STAR), (measured / SIGMA_STAR, expected / SIGMA_STAR)
+    fitted_a, fitted_d = np.linalg.lstsq(np.column_stack((k, -k**2)), measured, rcond=None)[0]
+    fitted_lambda = 4 * np.pi * fitted_d / fitted_a
+    assert abs(fitted_lambda / LAMBDA_STAR - 1) < 0.10, fitted_lambda
+    assert abs(fitted_a**2 / (4 * fitted_d) / SIGMA_STAR - 1) < 0.10
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_white_noise_develops_lambda_star(seed):
+    n = 128
+    spacing = 16 * LAMBDA_STAR / n  # 8 cells per lambda*: the spectral operator is exact at any resolution
+    rng = np.random.default_rng(seed)
+    h = 1e-6 * rng.standard_normal((n, n))
+    h = ablation.spectral_linear_step(h, spacing, 5.0 / SIGMA_STAR, A_B, D, 0.0)
+    assert abs(metrics.dominant_wavelength(h, spacing) / LAMBDA_STAR - 1) < 0.15
+
+
+def test_two_d_growth_is_isotropic():
+    """Same sigma along the grid axis and the diagonal (grid-anisotropy check)."""
+    n, spacing = 64, LAMBDA_STAR / 8
+    y, x = np.meshgrid(np.arange(n) * spacing, np.arange(n) * spacing, indexing="ij")
+    k_axis = 2 * np.pi * 8 / (n * spacing)
+    for field, k in ((np.cos(k_axis * x), k_axis), (np.cos(k_axis * (x + y)), k_axis * np.sqrt(2))):
+        grown = ablation.spectral_linear_step(1e-6 * field, spacing, 1000.0, A_B, D, 0.0)
+        rate = np.log(np.abs(grown).max() / 1e-6) / 1000.0
+        assert rate == pytest.approx(float(ablation.linear_growth_rate(k, A_B, D)), rel=1e-6)
