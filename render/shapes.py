@@ -77,3 +77,28 @@ def disk_mesh(center=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), radius: float = 1.
     vertices = np.vstack([np.asarray(center, dtype=np.float64)[None], rim])
     faces = [(0, 1 + i, 1 + (i + 1) % segments) for i in range(segments)]
     return vertices.astype(np.float32), np.asarray(faces, dtype=np.uint32)
+
+
+def frame_mesh(inner_lower, inner_upper, margin: float, top_z: float, thickness: float) -> Mesh:
+    """A closed rectangular ring: the box of footprint ``inner`` grown by ``margin`` on every side,
+    minus the ``inner`` footprint, between ``top_z - thickness`` and ``top_z`` (m).
+
+    It is one manifold (genus 1), so a medium inside it has no internal faces.
+    """
+    (x0, y0), (x1, y1) = (tuple(float(c) for c in inner_lower[:2]), tuple(float(c) for c in inner_upper[:2]))
+    if not (x1 > x0 and y1 > y0 and margin > 0 and thickness > 0):
+        raise ValueError("frame_mesh needs a non-empty inner footprint and positive margin and thickness")
+    X0, Y0, X1, Y1 = x0 - margin, y0 - margin, x1 + margin, y1 + margin
+    ring = [(X0, Y0), (X1, Y0), (X1, Y1), (X0, Y1)]     # outer, counter-clockwise from above
+    hole = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]     # inner, same order
+    z_bottom = top_z - thickness
+    vertices = [(x, y, z) for z in (z_bottom, top_z) for x, y in ring + hole]
+    # Indices: bottom outer 0-3, bottom inner 4-7, top outer 8-11, top inner 12-15.
+    faces = []
+    for i in range(4):
+        j = (i + 1) % 4
+        faces += [(8 + i, 8 + j, 12 + j), (8 + i, 12 + j, 12 + i)]      # top annulus, normal +z
+        faces += [(i, 4 + j, j), (i, 4 + i, 4 + j)]                      # bottom annulus, normal -z
+        faces += [(i, j, 8 + j), (i, 8 + j, 8 + i)]                      # outer walls, outwards
+        faces += [(4 + i, 12 + j, 4 + j), (4 + i, 12 + i, 12 + j)]      # inner walls, towards the hole
+    return np.asarray(vertices, dtype=np.float32), np.asarray(faces, dtype=np.uint32)

@@ -1,0 +1,53 @@
+"""OpenEXR images through OpenImageIO, written atomically: float32 RGB (H, W, 3) arrays."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from pipeline.atomic import atomic_path
+
+
+def write_exr(path: str | os.PathLike[str], array: np.ndarray, *, channels: tuple[str, ...] | None = None) -> Path:
+    """Write an (H, W) or (H, W, C) array as a float32 EXR (ZIP compression); RGB(A) names by default."""
+    image = np.asarray(array, dtype=np.float32)
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3:
+        raise ValueError(f"write_exr needs an (H, W) or (H, W, C) array, got shape {image.shape}")
+    height, width, nchannels = image.shape
+    names = channels or {1: ("Y",), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}.get(
+        nchannels, tuple(f"C{i}" for i in range(nchannels)))
+    spec = oiio.ImageSpec(width, height, nchannels, oiio.FLOAT)
+    spec.channelnames = tuple(names)
+    spec.attribute("compression", "zip")
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None:
+            raise RuntimeError(f"OpenImageIO cannot create {path}: {oiio.geterror()}")
+        try:
+            if not out.open(str(tmp), spec) or not out.write_image(np.ascontiguousarray(image)):
+                raise RuntimeError(f"cannot write {path}: {out.geterror()}")
+        finally:
+            out.close()
+    return Path(path)
+
+
+def read_exr(path: str | os.PathLike[str]) -> np.ndarray:
+    """Read an EXR (or any OpenImageIO image) as float32 (H, W, C)."""
+    source = oiio.ImageInput.open(str(path))
+    if source is None:
+        raise FileNotFoundError(f"cannot open {path}: {oiio.geterror()}")
+    try:
+        pixels = source.read_image(oiio.FLOAT)
+    finally:
+        source.close()
+    if pixels is None:
+        raise RuntimeError(f"cannot read {path}")
+    pixels = np.asarray(pixels, dtype=np.float32)
+    return pixels if pixels.ndim == 3 else pixels[..., None]
+
+
+__all__ = ["write_exr", "read_exr"]
