@@ -1,0 +1,393 @@
+"""The `reference` stage: render the neutral scene (render/scene.py) with Mitsuba 3 and mitransient.
+
+Conventions, on top of render/scene.py and ptpb.md §1-§2:
+
+- Steady images are ``volpath``; transient ones ``transient_prbvolpath`` with ``camera_unwarp: False``,
+  so τ includes the camera leg. Frames are bins (``transient_hdr_film``): W m-2 sr-1 per bin, returned
+  as (T, H, W, 3) float32 C-contiguous (mitransient's own array is (H, W, T, C), ptpb.md §2).
+- Inside null boundaries mitransient moves at c (OPL = geometric length); only a dielectric BSDF
+  changes its η.
+- Media: Mitsuba's ``rgb`` spectra must lie in [0, 1], so sigma_t is passed as sigma_t / max(sigma_t)
+  with ``scale`` = max(sigma_t); albedo = sigma_s / sigma_t (0 where sigma_t = 0).
+- The disk sun is a one-sided ``disk`` area emitter at ``disk_distance_radii`` bounding radii from the
+  bounding-sphere centre C towards the sun, of angular radius α = angular_diameter / 2 seen from C and
+  radiance E / (π sin²α), so a plane at C facing the sun receives E. Its light leaves the disk at
+  τ = 0, so in transient renders the film window is moved later by the OPL from the ptpb τ = 0
+  plane to the disk (when it is the only timed emitter) and frames stay on the ptpb time axis.
+- Rendering goes in passes of ``spp_per_pass``; pass i uses seed + i (Mitsuba adds the sampler's
+  ``seed`` to ``render``'s seed, so the dict holds ``seed`` and pass i renders with seed=i).
+"""
+from __future__ import annotations
+
+import importlib
+import logging
+import math
+import resource
+import time
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from pipeline.atomic import save_npy_atomic, write_json_atomic
+from pipeline.schema.scene import ReferenceConfig
+from render.exr import write_exr
+from render.ply import read_ply
+from render.scene import Scene, bounding_sphere_of_points
+
+log = logging.getLogger(__name__)
+
+FRAME_UNITS = "W m^-2 sr^-1 per bin"
+DEFAULT_DISK_DISTANCE_RADII = 1000.0
+TRANSIENT_SEED_OFFSET = 1 << 16  # keeps the transient reference's noise independent of the steady one
+
+
+class ReferenceRefused(ValueError):
+    """The scene is one that Mitsuba renders wrongly (not just noisily); the message says what to change."""
+
+
+# ---------------------------------------------------------------- variants
+
+def use_variant(preferred: str = "llvm_ad_rgb", *, transient: bool) -> str:
+    """Set a Mitsuba variant and return its name; transient renders also import mitransient.
+
+    Steady: ``preferred``, falling back to scalar_rgb with a warning. Transient: llvm_ad_rgb or an error,
+    because mitransient registers its plugins only under llvm/cuda variants."""
+    import mitsuba as mi
+
+    wanted = "llvm_ad_rgb" if transient else preferred
+    try:
+        mi.set_variant(wanted)
+    except Exception as err:  # noqa: BLE001 - Mitsuba raises several types when a JIT backend is missing
+        if transient:
+            raise RuntimeError(
+                f"the transient reference needs Mitsuba's llvm_ad_rgb variant (mitransient registers its plugins "
+                f"only under llvm/cuda variants), but it cannot be set: {err}. Install libllvm19 or point "
+                "DRJIT_LIBLLVM_PATH at a recent libLLVM, or set reference.transient: false") from err
+        if wanted == "scalar_rgb":
+            raise
+        log.warning("Mitsuba variant %s is unavailable (%s); rendering the steady reference with scalar_rgb",
+                    wanted, err)
+        mi.set_variant("scalar_rgb")
+    if transient:
+        importlib.import_module("mitransient")
+    return str(mi.variant())
+
+
+# ---------------------------------------------------------------- scene export
+
+def _bounding_sphere(scene: Scene, scene_dir: Path) -> tuple[np.ndarray, float]:
+    if scene.bounding_sphere is not None:
+        return np.asarray(scene.bounding_sphere["center"], np.float64), float(scene.bounding_sphere["radius"])
+    points = [read_ply(scene.mesh_path(s, scene_dir))[0] for s in scene.shapes]
+    if not points:
+        return np.zeros(3), 1.0
+    return bounding_sphere_of_points(np.concatenate(points))
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64)
+    return v / np.linalg.norm(v)
+
+
+def _any_up(direction: np.ndarray) -> list[float]:
+    return [0.0, 0.0, 1.0] if abs(direction[2]) < 0.9 else [0.0, 1.0, 0.0]
+
+
+def disk_sun(light: dict[str, Any], centre: np.ndarray, radius: float) -> dict[str, Any]:
+    """Geometry of the disk sun: centre, unit normal (towards the scene), disk radius, distance, radiance."""
+    s = _unit(light["to_sun"])
+    distance = float(light.get("disk_distance_radii") or DEFAULT_DISK_DISTANCE_RADII) * radius
+    alpha = math.radians(float(light["angular_diameter_deg"])) / 2
+    # Projected solid angle π sin²α (not 2π(1 - cos α)): a plane at C facing the sun then gets exactly E.
+    radiance = np.asarray(light["irradiance"], np.float64) / (math.pi * math.sin(alpha) ** 2)
+    return {"center": centre + distance * s, "normal": -s, "radius": distance * math.tan(alpha),
+            "distance": distance, "radiance": radiance}
+
+
+def _timed_emitters(scene: Scene) -> list[str]:
+    names = [light["type"] for light in scene.lights if light["type"] in ("point", "spot")]
+    return names + [s.name for s in scene.shapes if s.emission is not None and max(s.emission) > 0]
+
+
+def disk_sun_opl_shift(scene: Scene, scene_dir: Path) -> float:
+    """OPL [m] by which mitransient's film window is moved for a disk sun (0 when not applied): from the
+    ptpb τ = 0 plane (through tau_origin_point, normal to_sun) to the emitting disk."""
+    suns = _suns(scene, "disk")
+    if not suns or _timed_emitters(scene):
+        return 0.0
+    light = suns[0]
+    centre, radius = _bounding_sphere(scene, scene_dir)
+    s = _unit(light["to_sun"])
+    origin = np.asarray(light.get("tau_origin_point") or centre + radius * s, np.float64)
+    return float((disk_sun(light, centre, radius)["center"] - origin) @ s)
+
+
+def _rgb(value) -> dict[str, Any]:
+    return {"type": "rgb", "value": [float(v) for v in value]}
+
+
+def _medium_dict(medium) -> dict[str, Any]:
+    sigma_s = np.asarray(medium.sigma_s, np.float64)
+    sigma_t = sigma_s + np.asarray(medium.sigma_a, np.float64)
+    albedo = np.divide(sigma_s, sigma_t, out=np.zeros(3), where=sigma_t > 0)
+    scale = float(sigma_t.max()) if sigma_t.max() > 0 else 1.0
+    return {"type": "homogeneous", "sigma_t": _rgb(sigma_t / scale), "scale": scale,
+            "albedo": _rgb(np.clip(albedo, 0.0, 1.0)), "phase": {"type": "hg", "g": float(medium.g)}}
+
+
+def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int, seed: int = 0) -> dict:
+    """The ``mi.load_dict`` dictionary of ``scene`` (meshes resolved against ``scene_dir``).
+
+    A variant must be set (``use_variant``); transient dicts need mitransient imported to load."""
+    import mitsuba as mi
+
+    if mi.variant() is None:
+        use_variant(transient=transient)
+    T = mi.ScalarTransform4f
+    scene_dir = Path(scene_dir)
+    cam, film = scene.camera, scene.film
+    centre, radius = _bounding_sphere(scene, scene_dir)
+    out: dict[str, Any] = {"type": "scene"}
+
+    if transient:
+        out["integrator"] = {"type": "transient_prbvolpath", "camera_unwarp": False,
+                             "max_depth": scene.max_depth, "rr_depth": scene.rr_depth}
+        film_dict = {"type": "transient_hdr_film", "width": cam.width, "height": cam.height,
+                     "temporal_bins": film.temporal_bins, "bin_width_opl": film.bin_width_opl,
+                     "start_opl": film.start_opl + disk_sun_opl_shift(scene, scene_dir), "rfilter": {"type": "box"}}
+    else:
+        out["integrator"] = {"type": "volpath", "max_depth": scene.max_depth, "rr_depth": scene.rr_depth}
+        film_dict = {"type": "hdrfilm", "width": cam.width, "height": cam.height, "rfilter": {"type": "box"},
+                     "pixel_format": "rgb"}
+
+    for key, medium in scene.media.items():  # declared first so that shapes and the camera can refer to them
+        out[f"medium_{key}"] = _medium_dict(medium)
+
+    def ref(key: str) -> dict[str, str]:
+        if key not in scene.media:
+            raise ValueError(f"medium '{key}' is not defined in scene.media ({', '.join(scene.media) or 'none'})")
+        return {"type": "ref", "id": f"medium_{key}"}
+
+    far = 1e4  # Mitsuba's default far clip, widened so that the camera can see a far disk sun
+    for light in scene.lights:
+        if light["type"] == "sun" and light["model"] == "disk":
+            reach = np.linalg.norm(np.asarray(cam.origin) - centre) + disk_sun(light, centre, radius)["distance"]
+            far = max(far, 2.0 * reach)
+    sensor = {"type": "perspective", "fov": float(cam.fov), "fov_axis": cam.fov_axis, "far_clip": float(far),
+              "to_world": T().look_at(origin=list(cam.origin), target=list(cam.target), up=list(cam.up)),
+              "film": film_dict, "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)}}
+    if cam.medium:
+        sensor["medium"] = ref(cam.medium)
+    out["sensor"] = sensor
+
+    for i, shape in enumerate(scene.shapes):
+        d: dict[str, Any] = {"type": "ply", "filename": str(Path(scene.mesh_path(shape, scene_dir)).resolve()),
+                             "face_normals": True}
+        if shape.kind == "null":
+            d["bsdf"] = {"type": "null"}
+        elif shape.kind == "dielectric":
+            if not shape.interior:
+                raise ValueError(f"shape '{shape.name}' is dielectric but has no interior medium to give its ior")
+            d["bsdf"] = {"type": "dielectric", "int_ior": float(scene.media[shape.interior].ior), "ext_ior": 1.0}
+        elif shape.kind == "diffuse":
+            if shape.albedo is None:
+                raise ValueError(f"shape '{shape.name}' is diffuse but has no albedo")
+            d["bsdf"] = {"type": "diffuse", "reflectance": _rgb(shape.albedo)}
+        else:
+            raise ValueError(f"shape '{shape.name}': unknown kind {shape.kind!r} (null, dielectric or diffuse)")
+        if shape.interior:
+            d["interior"] = ref(shape.interior)
+        if shape.emission is not None and max(shape.emission) > 0:
+            d["emitter"] = {"type": "area", "radiance": _rgb(shape.emission)}
+        out[f"shape_{i}_{shape.name}"] = d
+
+    for i, light in enumerate(scene.lights):
+        kind, key = light["type"], f"light_{i}_{light['type']}"
+        if kind == "sun" and light["model"] == "directional":
+            out[key] = {"type": "directional", "direction": [float(v) for v in -_unit(light["to_sun"])],
+                        "irradiance": _rgb(light["irradiance"])}
+        elif kind == "sun" and light["model"] == "disk":
+            disk = disk_sun(light, centre, radius)
+            frame = T().look_at(origin=list(disk["center"]), target=list(disk["center"] + disk["normal"]),
+                                up=_any_up(disk["normal"]))  # the disk's local +z (its emitting side) faces the scene
+            out[key] = {"type": "disk", "to_world": frame @ T().scale([disk["radius"], disk["radius"], 1.0]),
+                        "bsdf": {"type": "diffuse", "reflectance": _rgb((0, 0, 0))},
+                        "emitter": {"type": "area", "radiance": _rgb(disk["radiance"])}}
+        elif kind == "sun":
+            raise ValueError(f"sun model {light['model']!r} is neither directional nor disk")
+        elif kind == "sky":
+            out[key] = {"type": "constant", "radiance": _rgb(light["radiance"])}
+        elif kind == "point":
+            out[key] = {"type": "point", "position": [float(v) for v in light["position"]],
+                        "intensity": _rgb(light["intensity"])}
+        elif kind == "spot":
+            p, direction = np.asarray(light["position"], np.float64), _unit(light["direction"])
+            out[key] = {"type": "spot", "intensity": _rgb(light["intensity"]),
+                        "cutoff_angle": float(light["cutoff_angle_deg"]), "beam_width": float(light["beam_width_deg"]),
+                        "to_world": T().look_at(origin=list(p), target=list(p + direction), up=_any_up(direction))}
+        else:
+            raise ValueError(f"unknown light type {kind!r}")
+    return out
+
+
+# ---------------------------------------------------------------- limits
+
+def _suns(scene: Scene, model: str) -> list[dict[str, Any]]:
+    return [light for light in scene.lights if light["type"] == "sun" and light["model"] == model]
+
+
+def _delta_lights(scene: Scene) -> list[dict[str, Any]]:
+    return [light for light in scene.lights if light["type"] in ("point", "spot")] + _suns(scene, "directional")
+
+
+def check_reference_limits(scene: Scene, *, transient: bool, force: bool) -> list[str]:
+    """Refuse scenes Mitsuba renders wrongly (unless ``force``); return warnings about what it leaves out."""
+    warnings: list[str] = []
+    sealed = [s for s in scene.shapes if s.kind == "dielectric" and s.interior]
+    # A point or spot light inside the very medium a dielectric encloses is reached without crossing it.
+    blocked = sorted({light["type"] if light["type"] != "sun" else "directional sun"
+                      for light in _delta_lights(scene) for s in sealed if light.get("medium") != s.interior})
+    if blocked:
+        ids = sorted({s.interior for s in sealed})
+        message = (
+            f"the {' and '.join(blocked)} light(s) reach the media {', '.join(ids)} only through a smooth "
+            f"dielectric boundary (shapes {', '.join(s.name for s in sealed)}): Mitsuba's next-event estimation "
+            "is blocked by the specular interface and BSDF sampling never hits a delta light, so the medium "
+            "renders black. Use a finite sun "
+            "(scene.sun.kind: disk), an index-matched boundary ("
+            + ", ".join(f"scene.media.{k}.boundary: null" for k in ids)
+            + "), or set reference.force: true to render it anyway")
+        if not force:
+            raise ReferenceRefused(message)
+        warnings.append("forced: " + message)
+    if sealed and _suns(scene, "disk"):
+        warnings.append("the disk sun reaches media inside dielectric boundaries only through BSDF sampling "
+                        "(next-event estimation is blocked by the specular interface): expect heavy noise there")
+    if transient:
+        sky = [light for light in scene.lights if light["type"] == "sky" and max(light["radiance"]) > 0]
+        if sky:
+            warnings.append("the constant sky is missing from mitransient's transient frames (its paths have no "
+                            "finite OPL); it is in the steady images only, so frames sum to less than the steady image")
+        if _suns(scene, "directional"):
+            warnings.append("mitransient's directional sun is not a plane wavefront: next-event estimation puts the "
+                            "sun 2 R_s behind every shading point, so direct-sun τ is 2 R_s plus the camera leg "
+                            "everywhere; do not compare sun timing with it (ptpb.md §11)")
+        if _suns(scene, "disk") and _timed_emitters(scene):
+            warnings.append("the disk sun's light reaches the scene disk_distance_radii bounding radii later than "
+                            "the ptpb τ origin, and other timed emitters share the film, so the window is not "
+                            "shifted: the sun's light lies outside the frames")
+        if scene.camera.medium:
+            warnings.append(f"mitransient ignores camera.medium '{scene.camera.medium}' (camera paths start in "
+                            "vacuum), so its transient reference leaves that medium out along every camera ray "
+                            "until the ray crosses a boundary: do not compare it")
+        if scene.film.frame_mode == "gate":
+            warnings.append("mitransient frames are bins (integrals over each bin); divide by bin_width_opl to "
+                            "compare with gate frames")
+    return warnings
+
+
+# ---------------------------------------------------------------- rendering
+
+def _render_passes(scene: Scene, scene_dir: Path, *, transient: bool, spp: int, spp_per_pass: int, seed: int,
+                   time_budget_s: Optional[float], variant: str, quiet: bool) -> tuple[list[np.ndarray], dict]:
+    import mitsuba as mi
+    from tqdm import tqdm
+
+    variant = use_variant(variant, transient=transient)
+    mi_scene = mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass, seed=seed))
+    sums: list[np.ndarray] = []
+    done = passes = 0
+    last = 0.0
+    start = time.perf_counter()
+    desc = "mitransient" if transient else "mitsuba"
+    with tqdm(total=None if time_budget_s else spp, unit="spp", desc=desc, leave=False, disable=quiet) as bar:
+        while True:
+            elapsed = time.perf_counter() - start
+            if time_budget_s is None and done >= spp:
+                break
+            # The budget replaces spp (ReferenceConfig): stop before the pass that would overrun it.
+            if time_budget_s is not None and passes and elapsed + last > time_budget_s:
+                break
+            n = spp_per_pass if time_budget_s is not None else min(spp_per_pass, spp - done)
+            t0 = time.perf_counter()
+            result = mi.render(mi_scene, seed=passes, spp=n)
+            images = ([np.array(result[1]), np.array(result[0])] if transient else [np.array(result)])
+            images = [im[..., :3].astype(np.float64) * n for im in images]
+            sums = images if not sums else [a + b for a, b in zip(sums, images)]
+            last = time.perf_counter() - t0
+            done += n
+            passes += 1
+            bar.update(n)
+    timing = {"seconds": time.perf_counter() - start, "spp": done, "passes": passes, "spp_per_pass": spp_per_pass,
+              "seed": seed, "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+              "variant": variant, "integrator": "transient_prbvolpath" if transient else "volpath"}
+    return [s / done for s in sums], timing
+
+
+def render_steady(scene: Scene, scene_dir: Path, *, spp: int, spp_per_pass: int = 16, seed: int = 0,
+                  time_budget_s: Optional[float] = None, variant: str = "llvm_ad_rgb",
+                  quiet: bool = False) -> tuple[np.ndarray, dict]:
+    """Mitsuba volpath image (H, W, 3) float32 and its timing {seconds, spp, passes, peak_memory_mib, variant}."""
+    (image,), timing = _render_passes(scene, scene_dir, transient=False, spp=spp, spp_per_pass=spp_per_pass,
+                                      seed=seed, time_budget_s=time_budget_s, variant=variant, quiet=quiet)
+    return np.ascontiguousarray(image, dtype=np.float32), timing
+
+
+def render_transient(scene: Scene, scene_dir: Path, *, spp: int, spp_per_pass: int = 16, seed: int = 0,
+                     time_budget_s: Optional[float] = None, quiet: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """mitransient frames (T, H, W, 3) float32 in bins of scene.film, its own steady image (H, W, 3), timing."""
+    (frames, steady), timing = _render_passes(scene, scene_dir, transient=True, spp=spp, spp_per_pass=spp_per_pass,
+                                              seed=seed, time_budget_s=time_budget_s, variant="llvm_ad_rgb",
+                                              quiet=quiet)
+    frames = np.ascontiguousarray(np.moveaxis(frames, 2, 0), dtype=np.float32)  # (H, W, T, C) -> (T, H, W, C)
+    timing["start_opl_shift_m"] = disk_sun_opl_shift(scene, scene_dir)
+    return frames, np.ascontiguousarray(steady, dtype=np.float32), timing
+
+
+# ---------------------------------------------------------------- the stage
+
+def run_reference_stage(scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *, seed: int,
+                        quiet: bool = False) -> dict:
+    """Render ``scene_dir/scene.json`` as ``cfg`` asks and write the reference outputs into ``out_dir``:
+    steady.exr/.npy, frames.npy, frames/frame_NNNN.exr, transient_steady.npy and timing.json."""
+    scene_dir, out_dir = Path(scene_dir), Path(out_dir)
+    scene = Scene.load(scene_dir / "scene.json")
+    transient = cfg.transient and scene.film.mode == "transient"
+    warnings = check_reference_limits(scene, transient=transient, force=cfg.force)
+    if cfg.transient and not transient:
+        warnings.append("reference.transient is set but scene.film.mode is steady: no transient reference")
+    for w in warnings:
+        log.warning("reference: %s", w)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    common = {"spp_per_pass": cfg.spp_per_pass, "time_budget_s": cfg.time_budget_s, "quiet": quiet}
+    timing: dict[str, Any] = {
+        "steady": None, "transient": None, "warnings": warnings, "camera_leg_included": True,
+        "frame_units": FRAME_UNITS,
+        "film": {"mode": scene.film.mode, "temporal_bins": scene.film.temporal_bins,
+                 "start_opl": scene.film.start_opl, "bin_width_opl": scene.film.bin_width_opl,
+                 "end_opl": scene.film.start_opl + scene.film.temporal_bins * scene.film.bin_width_opl,
+                 "width": scene.camera.width, "height": scene.camera.height, "frame_mode": "bins"},
+    }
+    if cfg.steady:
+        image, timing["steady"] = render_steady(scene, scene_dir, spp=cfg.spp, seed=seed, variant=cfg.variant, **common)
+        write_exr(out_dir / "steady.exr", image)
+        save_npy_atomic(out_dir / "steady.npy", image)
+    if transient:
+        frames, steady, timing["transient"] = render_transient(
+            scene, scene_dir, spp=cfg.transient_spp or cfg.spp, seed=seed + TRANSIENT_SEED_OFFSET, **common)
+        save_npy_atomic(out_dir / "frames.npy", frames)
+        save_npy_atomic(out_dir / "transient_steady.npy", steady)
+        for k, frame in enumerate(frames):
+            write_exr(out_dir / "frames" / f"frame_{k:04d}.exr", frame)
+        timing["film"]["start_opl_shift_m"] = timing["transient"]["start_opl_shift_m"]
+    write_json_atomic(out_dir / "timing.json", timing)
+    return {"steady": timing["steady"] is not None, "transient": timing["transient"] is not None,
+            "frames": scene.film.temporal_bins if transient else 0,
+            "seconds": sum(t["seconds"] for t in (timing["steady"], timing["transient"]) if t),
+            "warnings": warnings}
+
+
+__all__ = ["ReferenceRefused", "use_variant", "scene_to_mitsuba", "check_reference_limits", "disk_sun",
+           "disk_sun_opl_shift", "render_steady", "render_transient", "run_reference_stage", "FRAME_UNITS"]
