@@ -25,7 +25,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from pipeline.schema.ptpb import PTPBConfig
+from pipeline.schema.ptpb import BeamRadius, PTPBConfig, TimeHalfWidth
 
 __all__ = ["RenderResult", "render", "resolve_settings", "scene_bounding_sphere"]
 
@@ -41,6 +41,7 @@ class RenderResult:
     late: np.ndarray
     stats: dict[str, Any]
     snapshots: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    snapshot_seconds: list[float] = field(default_factory=list)  # wall time of each snapshot since the start
 
 
 def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:
@@ -70,32 +71,46 @@ def _tan_half_fov_x(cam: dict) -> float:
     return t * aspect / math.sqrt(1 + aspect * aspect)
 
 
+def _resolve_radius(spec: BeamRadius, scene: dict, centre: np.ndarray, radius: float) -> float:
+    """A kernel radius in metres: absolute, a fraction of the scene radius, or pixel footprints
+    2 z tan(fov_x/2) / W at the distance z from the camera to the scene centre (ptpb.md §6)."""
+    if spec.unit == "m":
+        return spec.value
+    if spec.unit == "scene_radius":
+        return spec.value * radius
+    cam = scene["camera"]
+    depth = float(np.linalg.norm(centre - np.asarray(cam["origin"], dtype=np.float64))) or radius
+    return spec.value * 2 * depth * _tan_half_fov_x(cam) / cam["width"]
+
+
+def _resolve_half_width(spec: TimeHalfWidth, n: float, radius_m: float, bin_width: float) -> float:
+    """A temporal half-width in metres of OPL, with the floor of half a bin (ptpb.md §6)."""
+    if spec.unit == "m_opl":
+        t0 = spec.value
+    elif spec.unit == "bin_width":
+        t0 = spec.value * bin_width
+    else:
+        t0 = spec.value * n * radius_m
+    return max(t0, 0.5 * bin_width)
+
+
 def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
-    """Turn a PTPBConfig into the core's settings dict: units resolved to metres (ptpb.md §6)."""
+    """Turn a PTPBConfig into the core's settings dict: units resolved to metres (ptpb.md §6).
+
+    Beams and surface photons (§7) run separate schedules: R_0, T_0, alpha for the beams and
+    r_0, their own T_0 (the same rule with r_0 in place of R_0) and surface_alpha for surfaces."""
     film = scene["film"]
     mode = cfg.frame_mode or film["frame_mode"]
     alpha = cfg.alpha if cfg.alpha is not None else (2.0 / 3.0 if mode == "gate" else 0.8)
+    # alpha* = 4 / (d + 4): the disk (d = 2) in bins/steady, the disk x time kernel (d = 3) in gate.
+    surface_alpha = cfg.surface_alpha if cfg.surface_alpha is not None else (4.0 / 7.0 if mode == "gate" else 2.0 / 3.0)
     centre, radius = scene_bounding_sphere(scene)
-    cam = scene["camera"]
-    r = cfg.initial_beam_radius
-    if r.unit == "m":
-        r0 = r.value
-    elif r.unit == "scene_radius":
-        r0 = r.value * radius
-    else:
-        depth = float(np.linalg.norm(centre - np.asarray(cam["origin"], dtype=np.float64))) or radius
-        footprint = 2 * depth * _tan_half_fov_x(cam) / cam["width"]
-        r0 = r.value * footprint
+    r0 = _resolve_radius(cfg.initial_beam_radius, scene, centre, radius)
+    r0_surface = _resolve_radius(cfg.initial_surface_radius, scene, centre, radius)
     n = max([m.get("ior", 1.0) for m in scene.get("media", [])] + [scene.get("ambient_ior", 1.0)])
     bin_width = film.get("bin_width_opl", 0.003)
-    t = cfg.initial_time_half_width
-    if t.unit == "m_opl":
-        t0 = t.value
-    elif t.unit == "bin_width":
-        t0 = t.value * bin_width
-    else:
-        t0 = t.value * n * r0
-    t0 = max(t0, 0.5 * bin_width)
+    t0 = _resolve_half_width(cfg.initial_time_half_width, n, r0, bin_width)
+    t0_surface = _resolve_half_width(cfg.initial_time_half_width, n, r0_surface, bin_width)
     return {
         "iterations": cfg.iterations,
         "time_budget_s": cfg.time_budget_s or 0.0,
@@ -103,6 +118,10 @@ def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
         "alpha": alpha,
         "initial_beam_radius": r0,
         "initial_time_half_width": t0,
+        "initial_surface_radius": r0_surface,
+        "initial_surface_time_half_width": t0_surface,
+        "surface_alpha": surface_alpha,
+        "surface_normal_cos": cfg.surface_normal_cos,
         "spatial_kernel": cfg.spatial_kernel,
         "temporal_kernel": cfg.temporal_kernel,
         "photon_beam_kind": cfg.photon_beam_kind,
@@ -151,7 +170,8 @@ def render(
 
         def callback(info: dict) -> bool:
             bar.n = info["iteration"]
-            bar.set_postfix(R=f"{info['radius']:.3g}", beams=info["beams"], refresh=False)
+            bar.set_postfix(R=f"{info['radius']:.3g}", beams=info["beams"], r_s=f"{info['surface_radius']:.3g}",
+                            photons=info["surface_photons"], refresh=False)
             bar.refresh()
             return True
 
@@ -164,4 +184,12 @@ def render(
     stats["initial_beam_radius_m"] = core_settings["initial_beam_radius"]
     stats["initial_time_half_width_m"] = core_settings.get("initial_time_half_width", core_settings["initial_beam_radius"])
     stats["alpha"] = core_settings.get("alpha", 0.8)
-    return RenderResult(out["steady"], out["frames"], out["early"], out["late"], stats, list(out["snapshots"]))
+    # The core falls back to the beams' R_0 and T_0, and to the per-mode alpha*, without these keys.
+    stats["initial_surface_radius_m"] = core_settings.get("initial_surface_radius", core_settings["initial_beam_radius"])
+    stats["initial_surface_time_half_width_m"] = core_settings.get(
+        "initial_surface_time_half_width", stats["initial_time_half_width_m"])
+    surface_alpha = core_settings.get("surface_alpha")
+    stats["surface_alpha"] = surface_alpha if surface_alpha is not None else (
+        4.0 / 7.0 if scene["film"]["frame_mode"] == "gate" else 2.0 / 3.0)
+    return RenderResult(out["steady"], out["frames"], out["early"], out["late"], stats, list(out["snapshots"]),
+                        list(out["snapshot_seconds"]))

@@ -9,9 +9,9 @@ from pipeline.schema.base import StrictModel
 
 
 class BeamRadius(StrictModel):
-    """Initial spatial kernel radius R_0 with an explicit unit."""
+    """Initial spatial kernel radius (R_0 of the beams, r_0 of the surface photons) with an explicit unit."""
 
-    value: float = Field(..., gt=0, description="R_0 in the unit below [m | scene radii | pixel footprints].")
+    value: float = Field(..., gt=0, description="The radius in the unit below [m | scene radii | pixel footprints].")
     unit: Literal["m", "scene_radius", "pixel_footprint"] = Field(
         "pixel_footprint",
         description="m: absolute; scene_radius: fraction of the scene's bounding radius; pixel_footprint: "
@@ -26,7 +26,8 @@ class TimeHalfWidth(StrictModel):
     unit: Literal["m_opl", "bin_width", "beam_radius"] = Field(
         "beam_radius",
         description="m_opl: metres of optical path; bin_width: multiples of bin_width_opl; beam_radius: value * n * R_0 "
-        "with n the largest medium index. A floor of bin_width_opl / 2 applies [-].",
+        "with n the largest medium index (value * n * r_0 for the surface photons' own T_0). A floor of "
+        "bin_width_opl / 2 applies [-].",
     )
 
 
@@ -52,7 +53,22 @@ class PTPBConfig(StrictModel):
         default_factory=lambda: TimeHalfWidth(value=1.0, unit="beam_radius"),
         description="T_0, the initial temporal kernel half-width of gate mode [see unit].",
     )
-    spatial_kernel: Literal["box", "epanechnikov"] = Field("epanechnikov", description="1D spatial kernel k_R [-].")
+    initial_surface_radius: BeamRadius = Field(
+        default_factory=lambda: BeamRadius(value=2.0, unit="pixel_footprint"),
+        description="r_0, the initial 2D disk kernel radius of the surface photons on diffuse surfaces (ptpb.md §7) [see unit].",
+    )
+    surface_alpha: Optional[float] = Field(
+        None, gt=0, le=1,
+        description="Surface kernel-volume schedule parameter; null picks 4/7 for gate (r and T shrink as gamma^(1/3)) "
+        "and 2/3 for bins/steady (r shrinks as gamma^(1/2)) [-].",
+    )
+    surface_normal_cos: float = Field(
+        0.9, gt=0, le=1,
+        description="A surface photon counts only where its normal and the shading normal have at least this cosine [-].",
+    )
+    spatial_kernel: Literal["box", "epanechnikov"] = Field(
+        "epanechnikov", description="Spatial kernel: 1D k_R of the beams and the matching 2D disk kernel of the surface photons [-]."
+    )
     temporal_kernel: Literal["box", "epanechnikov", "quintic"] = Field(
         "epanechnikov", description="Temporal kernel K_T of gate mode [-]."
     )

@@ -143,6 +143,12 @@ RenderSettings parse_settings(const py::dict& d) {
   s.alpha = get<double>(d, "alpha", s.alpha, w);
   s.initial_beam_radius = require_key<double>(d, "initial_beam_radius", w);
   s.initial_time_half_width = get<double>(d, "initial_time_half_width", s.initial_beam_radius, w);
+  // Surface photons (§7): without their own keys they start from the beams' bandwidths.
+  s.initial_surface_radius = get<double>(d, "initial_surface_radius", s.initial_beam_radius, w);
+  if (d.contains("initial_surface_time_half_width") && !d["initial_surface_time_half_width"].is_none())
+    s.initial_surface_time_half_width = get<double>(d, "initial_surface_time_half_width", 0.0, w);
+  if (d.contains("surface_alpha") && !d["surface_alpha"].is_none()) s.surface_alpha = get<double>(d, "surface_alpha", 0.0, w);
+  s.surface_normal_cos = get<double>(d, "surface_normal_cos", s.surface_normal_cos, w);
   s.spatial_kernel = choose<SpatialKernel>(get<std::string>(d, "spatial_kernel", "epanechnikov", w),
                                            {{"box", SpatialKernel::Box}, {"epanechnikov", SpatialKernel::Epanechnikov}},
                                            "spatial_kernel");
@@ -204,6 +210,8 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
       info["radius"] = p.radius;
       info["time_half_width"] = p.time_half_width;
       info["beams"] = p.beams;
+      info["surface_radius"] = p.surface_radius;
+      info["surface_photons"] = p.surface_photons;
       py::object keep_going = progress(info);
       return keep_going.is_none() || keep_going.cast<bool>();
     } catch (py::error_already_set& e) {
@@ -231,6 +239,7 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
   for (std::size_t i = 0; i < r.snapshots.size(); ++i)
     snaps.append(py::make_tuple(r.snapshot_iterations[i], owned_array(std::move(r.snapshots[i]), {H, W, 3})));
   out["snapshots"] = snaps;
+  out["snapshot_seconds"] = py::cast(r.snapshot_seconds);
   const RenderStats& s = r.stats;
   py::dict st;
   st["iterations"] = s.iterations_done;
@@ -250,6 +259,12 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
   st["time_total_s"] = s.time_total_s;
   st["final_radius"] = s.final_radius;
   st["final_time_half_width"] = s.final_time_half_width;
+  st["surface_photons"] = s.surface_photons;
+  st["surface_queries"] = s.surface_queries;
+  st["surface_pairs"] = s.surface_pairs;
+  st["time_surface_build_s"] = s.time_surface_build_s;
+  st["final_surface_radius"] = s.final_surface_radius;
+  st["final_surface_time_half_width"] = s.final_surface_time_half_width;
   const double all = s.steady_total;
   st["out_of_window_fraction"] = all > 0 ? (s.early_total + s.late_total) / all : 0.0;
   st["early_fraction"] = all > 0 ? s.early_total / all : 0.0;

@@ -1,4 +1,5 @@
-// Light tracing (ptpb.md §3): emission, free flights, boundaries, roulette and beam records.
+// Light tracing (ptpb.md §3, §7): emission, free flights, boundaries, roulette, beam records and
+// surface photons.
 #include <cmath>
 #include <limits>
 
@@ -9,7 +10,7 @@
 namespace ptpb {
 
 void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::uint64_t iteration,
-                      std::uint64_t path_index, std::vector<Beam>& out) {
+                      std::uint64_t path_index, LightRecords& out) {
   KeyedRng rng(st.seed, iteration, StreamDomain::LightPath, path_index);
   LightSample ls;
   if (!cs.sample_emission(rng, ls)) return;
@@ -22,7 +23,8 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
   int medium = ls.medium, depth = 0;
   double tau = 0.0;
   for (int guard = 0; guard < 1000000; ++guard) {
-    // A beam at light depth d forms pairs of depth >= d + 2 (§3).
+    // A beam or surface photon at light depth d forms paths of depth >= d + 2 (§3; render.cpp
+    // gives the count for photons).
     if (st.max_depth >= 0 && depth + 2 > st.max_depth) return;
     const SurfaceHit hit = cs.intersect(pos, dir);
     const double dist = hit.valid ? hit.t : inf;
@@ -50,7 +52,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
         b.light_depth = depth;
         b.timeless = ls.timeless;
         b.path = static_cast<std::uint32_t>(path_index);
-        out.push_back(b);
+        out.beams.push_back(b);
       }
       if (scattered) {
         beta = beta * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
@@ -78,6 +80,21 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
       if (shape.kind == SurfaceKind::Null) {
         medium = hit.medium_after;
         continue;  // index-matched crossings are not interactions
+      }
+      if (shape.kind == SurfaceKind::Diffuse && max_component(shape.albedo) > 0 && max_component(beta) > 0) {
+        // Phi_p is the power that arrives, before the albedo: f_r = albedo/pi belongs to the
+        // estimator, as Tr_b does for beams. Black surfaces (emitters) can never return light.
+        SurfacePhoton p;
+        p.position = pos;
+        p.direction = dir;
+        p.normal = facing;
+        p.power = beta;
+        p.tau = tau;
+        p.shape = hit.shape;
+        p.light_depth = depth;  // this hit is not counted: it is the gather's reflection
+        p.timeless = ls.timeless;
+        p.path = static_cast<std::uint32_t>(path_index);
+        out.photons.push_back(p);
       }
       ++depth;
       if (shape.kind == SurfaceKind::Dielectric) {

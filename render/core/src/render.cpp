@@ -1,6 +1,7 @@
-// The progressive PTPB loop (ptpb.md §4–§6, §9): per iteration, trace M light paths into beams,
-// build the beam structure with R_i, trace one jittered camera path per pixel, evaluate every
-// ray–beam pair once and splat it into the steady image and every frame its kernel covers.
+// The progressive PTPB loop (ptpb.md §4–§7, §9): per iteration, trace M light paths into beams
+// and surface photons, build the beam structure with R_i and the photon grid with r_i, trace one
+// jittered camera path per pixel, evaluate every ray–beam pair and every photon at a diffuse
+// camera hit once, and splat it into the steady image and every frame its kernel covers.
 #include "ptpb/render.hpp"
 
 #include <algorithm>
@@ -19,6 +20,7 @@
 #include "ptpb/parallel.hpp"
 #include "ptpb/rng.hpp"
 #include "ptpb/sampling.hpp"
+#include "ptpb/surface_photons.hpp"
 
 namespace ptpb {
 namespace {
@@ -46,10 +48,18 @@ void validate(const RenderSettings& s) {
   require(s.snapshot_every >= 0, "snapshot_every must be >= 0");
   require(s.transmittance_cutoff > 0 && s.transmittance_cutoff < 1, "transmittance_cutoff must lie in (0, 1)");
   require(s.dice_length >= 0, "dice_length must be >= 0");
+  require(std::isfinite(s.initial_surface_radius) && s.initial_surface_radius > 0,
+          "initial_surface_radius must be > 0 (m)");
+  require(!s.initial_surface_time_half_width ||
+              (std::isfinite(*s.initial_surface_time_half_width) && *s.initial_surface_time_half_width > 0),
+          "initial_surface_time_half_width must be > 0 (m of OPL)");
+  require(!s.surface_alpha || (*s.surface_alpha > 0 && *s.surface_alpha <= 1), "surface_alpha must lie in (0, 1]");
+  require(s.surface_normal_cos > 0 && s.surface_normal_cos <= 1, "surface_normal_cos must lie in (0, 1]");
 }
 
 struct Counters {
   std::atomic<std::uint64_t> queries{0}, candidates{0}, pairs{0}, parallel{0}, false_positives{0};
+  std::atomic<std::uint64_t> surface_queries{0}, surface_pairs{0};
 };
 
 // Everything one iteration's camera pass needs, read-only.
@@ -58,8 +68,11 @@ struct CameraPass {
   const RenderSettings* st;
   const std::vector<Beam>* beams;
   const BeamAccel* accel;
+  const std::vector<SurfacePhoton>* photons;
+  const SurfacePhotonGrid* photon_grid;
   std::uint64_t iteration;
   double radius, time_half_width, inv_paths;
+  double surface_radius, surface_time_half_width;
   Vec3d cam_origin, cam_left, cam_up, cam_forward;
   double tan_x, tan_y, far_length;
   // Iteration buffers (double): steady/early/late are H*W*3, frames F*H*W*3.
@@ -71,7 +84,8 @@ struct PixelSplat {
   std::size_t pixel;
   std::size_t frame_stride;
 
-  void add(double tau, const Vec3d& v, bool timeless) const {
+  // T: the temporal half-width of gate mode; beams and surfaces each pass their own T_i.
+  void add(double tau, const Vec3d& v, bool timeless, double T) const {
     double* s = p.steady + 3 * pixel;
     s[0] += v.x; s[1] += v.y; s[2] += v.z;
     const Film& film = p.cs->scene().film;
@@ -88,7 +102,7 @@ struct PixelSplat {
       return;
     }
     // Gate: every frame centre within T of tau gets the temporal kernel's weight (§5).
-    const double T = p.time_half_width, dt = film.bin_width_opl;
+    const double dt = film.bin_width_opl;
     const double kmin_real = std::ceil((tau - T - film.start_opl) / dt - 0.5);
     const double kmax_real = std::floor((tau + T - film.start_opl) / dt - 0.5);
     if (kmax_real < 0 || kmin_real >= F) return;
@@ -106,6 +120,7 @@ struct PixelSplat {
 
 struct TileStats {
   std::uint64_t queries = 0, candidates = 0, pairs = 0, parallel = 0, false_positives = 0;
+  std::uint64_t surface_queries = 0, surface_pairs = 0;
 };
 
 // Beam×beam estimate along the query segment [0, t_q] of one camera segment (§4, §5).
@@ -144,8 +159,39 @@ void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, cons
     const double scalar = k_r * phase / std::sqrt(ca.sin2) * p.inv_paths;
     const Vec3d value = weight * m.sigma_s * tr_c * tr_b * b.power * scalar;
     const double tau = b.tau0 + n * ca.s + (st.camera_unwarp ? 0.0 : n * ca.t + tau_c);
-    splat.add(tau, value, b.timeless);
+    splat.add(tau, value, b.timeless, p.time_half_width);
     ++ts.pairs;
+  }
+}
+
+// Surface photon estimate at a diffuse camera hit x (§7):
+//   L(x, tau_f) = (1/M) sum_p k_r(|x - x_p|) K_T(tau_f - (tau_p + tau_c)) f_r Phi_p,
+// with f_r = albedo/pi (Lambert, so no dependence on the photon's direction). `normal` faces the
+// camera side; `weight` is the camera throughput W_c up to x and tau_c the camera OPL to x.
+//
+// Depth: Mitsuba's max_depth counts the segments of the emitter-to-camera path, i.e. its non-null
+// interactions + 1 (§3). A photon of light depth d has met d interactions before arriving at x,
+// the camera path has met d_c specular events before reaching x, and the reflection at x is one
+// more interaction: d + d_c + 1 interactions, depth d + d_c + 2, the same count as a beam x query
+// pair where the gather scattering plays the reflection's part. Direct light on a diffuse plane
+// (d = d_c = 0) is depth 2, which Mitsuba renders at max_depth = 2 ("direct illumination").
+void gather_surface(const CameraPass& p, const PixelSplat& splat, const Vec3d& x, const Vec3d& normal,
+                    const Vec3d& albedo, const Vec3d& weight, double tau_c, int depth_c,
+                    std::vector<std::uint32_t>& cand, TileStats& ts) {
+  const RenderSettings& st = *p.st;
+  p.photon_grid->query(x, cand);  // ascending photon indices: a canonical summation order (§9)
+  ++ts.surface_queries;
+  const Vec3d common = weight * albedo * (p.inv_paths / kPi);
+  const std::vector<SurfacePhoton>& photons = *p.photons;
+  for (std::uint32_t index : cand) {
+    const SurfacePhoton& ph = photons[index];
+    if (st.max_depth >= 0 && ph.light_depth + depth_c + 2 > st.max_depth) continue;
+    const double k = surface_photon_weight(ph, x, normal, p.surface_radius, st.spatial_kernel, st.surface_normal_cos);
+    if (k == 0.0) continue;
+    // Unwarped: the time the light reached the surface, without the camera leg (§1).
+    const double tau = ph.tau + (st.camera_unwarp ? 0.0 : tau_c);
+    splat.add(tau, common * ph.power * k, ph.timeless, p.surface_time_half_width);
+    ++ts.surface_pairs;
   }
 }
 
@@ -193,14 +239,14 @@ void trace_camera_path(const CameraPass& p, int px, int py, std::vector<std::uin
     if (!hit.valid) {
       // Sky seen directly: no time origin, so it only enters the steady image (§1).
       if (max_component(scene.environment_radiance) > 0 && (st.max_depth < 0 || depth_c + 1 <= st.max_depth))
-        splat.add(0.0, weight * scene.environment_radiance, true);
+        splat.add(0.0, weight * scene.environment_radiance, true, p.time_half_width);
       return;
     }
     if (!(max_component(weight) > 0)) return;
     tau_c += cs.ior(medium) * dist;
     const Shape& shape = scene.shapes[hit.shape];
     if (shape.is_emitter() && hit.entering && (st.max_depth < 0 || depth_c + 1 <= st.max_depth)) {
-      splat.add(st.camera_unwarp ? 0.0 : tau_c, weight * shape.radiance, false);
+      splat.add(st.camera_unwarp ? 0.0 : tau_c, weight * shape.radiance, false, p.time_half_width);
     }
     pos = hit.position;
     const Vec3d facing = hit.entering ? hit.normal : -hit.normal;
@@ -208,7 +254,13 @@ void trace_camera_path(const CameraPass& p, int px, int py, std::vector<std::uin
       medium = hit.medium_after;
       continue;
     }
-    if (shape.kind == SurfaceKind::Diffuse) return;  // surface photons (§7) are not implemented
+    if (shape.kind == SurfaceKind::Diffuse) {
+      // The camera path ends here (§7); depth d_c + 2 is the shallowest path a photon can close.
+      if (max_component(shape.albedo) > 0 && p.photon_grid->size() > 0 &&
+          (st.max_depth < 0 || depth_c + 2 <= st.max_depth))
+        gather_surface(p, splat, pos, facing, shape.albedo, weight, tau_c, depth_c, cand, ts);
+      return;
+    }
     ++depth_c;
     if (st.max_depth >= 0 && depth_c + 1 > st.max_depth) return;
     const double n_i = cs.ior(medium), n_t = cs.ior(hit.medium_after);
@@ -239,6 +291,25 @@ void iteration_bandwidths(FrameMode mode, const RenderSettings& s, long iteratio
   } else {
     radius = s.initial_beam_radius * gamma;
     time_half_width = s.initial_time_half_width;
+  }
+}
+
+double surface_schedule_alpha(FrameMode mode, const RenderSettings& s) {
+  if (s.surface_alpha) return *s.surface_alpha;
+  return mode == FrameMode::Gate ? 4.0 / 7.0 : 2.0 / 3.0;
+}
+
+void surface_bandwidths(FrameMode mode, const RenderSettings& s, long iteration, double& radius,
+                        double& time_half_width) {
+  const double gamma = schedule_gamma(iteration, surface_schedule_alpha(mode, s));
+  const double t0 = s.initial_surface_time_half_width.value_or(s.initial_time_half_width);
+  if (mode == FrameMode::Gate) {
+    const double shrink = std::cbrt(gamma);
+    radius = s.initial_surface_radius * shrink;
+    time_half_width = t0 * shrink;
+  } else {
+    radius = s.initial_surface_radius * std::sqrt(gamma);
+    time_half_width = t0;
   }
 }
 
@@ -297,39 +368,51 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   const std::uint64_t M = settings.light_paths_per_iteration;
   constexpr std::size_t kPathChunk = 256;
 
-  auto report = [&](int done, double R, double T, std::uint64_t nbeams) {
+  auto report = [&](int done, double R, double T, std::uint64_t nbeams, double r_s, std::uint64_t nphotons) {
     if (!progress) return;
-    Progress pr{done, settings.time_budget_s > 0 ? -1 : settings.iterations, seconds_since(t_start), R, T, nbeams};
+    Progress pr{done, settings.time_budget_s > 0 ? -1 : settings.iterations, seconds_since(t_start), R, T, nbeams,
+                r_s, nphotons};
     last_report = Clock::now();
     if (!progress(pr)) cancel.store(true);
   };
 
   std::vector<Beam> beams;
+  std::vector<SurfacePhoton> photons;
+  SurfacePhotonGrid photon_grid;
   for (long it = 0; it < max_iterations && !cancel.load(); ++it) {
     if (settings.time_budget_s > 0 && it > 0 && seconds_since(t_start) >= settings.time_budget_s) break;
     double R, T;
     iteration_bandwidths(film.mode, settings, it, R, T);
     if (film.mode == FrameMode::Gate) T = std::max(T, 0.0);
+    double r_s, T_s;
+    surface_bandwidths(film.mode, settings, it, r_s, T_s);
 
-    // 1. Light paths, in fixed chunks of path indices; beams kept in path order (§9).
+    // 1. Light paths, in fixed chunks of path indices; beams and photons kept in path order (§9).
     auto t0 = Clock::now();
     const std::size_t path_chunks = (M + kPathChunk - 1) / kPathChunk;
-    std::vector<std::vector<Beam>> chunk_beams(path_chunks);
+    std::vector<LightRecords> chunk_records(path_chunks);
     parallel_for_chunks(path_chunks, 1, settings.threads, [&](std::size_t c0, std::size_t c1) {
       for (std::size_t c = c0; c < c1; ++c) {
         const std::uint64_t end = std::min<std::uint64_t>(M, (c + 1) * kPathChunk);
-        for (std::uint64_t j = c * kPathChunk; j < end; ++j) trace_light_path(cs, settings, it, j, chunk_beams[c]);
+        for (std::uint64_t j = c * kPathChunk; j < end; ++j) trace_light_path(cs, settings, it, j, chunk_records[c]);
       }
     });
     beams.clear();
-    for (auto& v : chunk_beams) beams.insert(beams.end(), v.begin(), v.end());
-    chunk_beams.clear();
+    photons.clear();
+    for (auto& rec : chunk_records) {
+      beams.insert(beams.end(), rec.beams.begin(), rec.beams.end());
+      photons.insert(photons.end(), rec.photons.begin(), rec.photons.end());
+    }
+    chunk_records.clear();
     stats.time_light_s += seconds_since(t0);
 
     // 2. The beam structure, with this iteration's radius.
     t0 = Clock::now();
     accel->build(beams, R, settings.threads);
     stats.time_build_s += seconds_since(t0);
+    t0 = Clock::now();
+    photon_grid.build(photons, r_s);
+    stats.time_surface_build_s += seconds_since(t0);
 
     // 3. Camera pass by tiles; each tile owns its pixels.
     t0 = Clock::now();
@@ -342,6 +425,10 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     pass.iteration = static_cast<std::uint64_t>(it);
     pass.radius = accel->radius();
     pass.time_half_width = T;
+    pass.photons = &photons;
+    pass.photon_grid = &photon_grid;
+    pass.surface_radius = photon_grid.radius();
+    pass.surface_time_half_width = T_s;
     parallel_for_chunks(std::size_t(tiles_x) * tiles_y, 1, settings.threads, [&](std::size_t t_begin, std::size_t t_end) {
       std::vector<std::uint32_t> cand;
       for (std::size_t t = t_begin; t < t_end; ++t) {
@@ -355,8 +442,11 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
         counters.pairs += ts.pairs;
         counters.parallel += ts.parallel;
         counters.false_positives += ts.false_positives;
+        counters.surface_queries += ts.surface_queries;
+        counters.surface_pairs += ts.surface_pairs;
         // Only the calling thread may talk to Python (signals are delivered to the main thread).
-        if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5) report(int(it), R, T, beams.size());
+        if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5)
+          report(int(it), R, T, beams.size(), r_s, photons.size());
       }
     });
     stats.time_camera_s += seconds_since(t0);
@@ -374,13 +464,17 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     stats.accel_references += accel->references();
     stats.final_radius = R;
     stats.final_time_half_width = T;
+    stats.surface_photons += photons.size();
+    stats.final_surface_radius = photon_grid.radius();
+    stats.final_surface_time_half_width = T_s;
     if (settings.snapshot_every > 0 && (it + 1) % settings.snapshot_every == 0) {
       std::vector<float> snap(acc_steady.size());
       for (std::size_t i = 0; i < snap.size(); ++i) snap[i] = float(acc_steady[i] / double(it + 1));
       result.snapshots.push_back(std::move(snap));
       result.snapshot_iterations.push_back(int(it + 1));
+      result.snapshot_seconds.push_back(seconds_since(t_start));
     }
-    report(int(it + 1), R, T, beams.size());
+    report(int(it + 1), R, T, beams.size(), r_s, photons.size());
   }
 
   stats.cancelled = cancel.load();
@@ -389,6 +483,8 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   stats.pair_evaluations = counters.pairs;
   stats.parallel_rejected = counters.parallel;
   stats.false_positives = counters.false_positives;
+  stats.surface_queries = counters.surface_queries;
+  stats.surface_pairs = counters.surface_pairs;
   const double inv_n = stats.iterations_done > 0 ? 1.0 / stats.iterations_done : 0.0;
   auto to_float = [&](const std::vector<double>& src, std::vector<float>& dst, double* total) {
     dst.resize(src.size());

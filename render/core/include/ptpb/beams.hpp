@@ -1,5 +1,5 @@
 // Photon beams (ptpb.md §3): the record stored per medium segment of a light path, and the
-// light tracer that produces them.
+// light tracer that produces them together with the surface photons of §7.
 #pragma once
 #include <algorithm>
 #include <cmath>
@@ -9,6 +9,7 @@
 
 #include "ptpb/compiled_scene.hpp"
 #include "ptpb/render.hpp"
+#include "ptpb/surface_photons.hpp"
 
 namespace ptpb {
 
@@ -25,13 +26,16 @@ struct Beam {
   std::uint32_t path = 0;
 };
 
-struct LightTraceStats {
-  std::uint64_t paths = 0;
+// What light paths leave behind: beams (medium segments) and surface photons (diffuse hits).
+struct LightRecords {
+  std::vector<Beam> beams;
+  std::vector<SurfacePhoton> photons;
 };
 
-// Traces light path `path_index` of iteration `iteration` and appends its beams in path order.
+// Traces light path `path_index` of iteration `iteration` and appends its beams and surface
+// photons, each in the order the path made them.
 void trace_light_path(const CompiledScene& scene, const RenderSettings& settings,
-                      std::uint64_t iteration, std::uint64_t path_index, std::vector<Beam>& out);
+                      std::uint64_t iteration, std::uint64_t path_index, LightRecords& out);
 
 // Exponential free-flight helpers shared by light and camera tracing (channel-average mixture).
 inline double survival_mixture(const Vec3d& sigma_t, double s) {

@@ -3,6 +3,7 @@
 #pragma once
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <vector>
 
 #include "ptpb/kernels.hpp"
@@ -20,6 +21,11 @@ struct RenderSettings {
   double alpha = 0.8;                  // kernel-volume schedule parameter (§6)
   double initial_beam_radius = 0.01;   // R_0, m
   double initial_time_half_width = 0.01;  // T_0, m of OPL (gate mode)
+  // Surface photons (§7) run their own schedule (§6): disk radius r_0 and, in gate mode, T_0.
+  double initial_surface_radius = 0.01;  // r_0, m
+  std::optional<double> initial_surface_time_half_width;  // m of OPL; unset: initial_time_half_width
+  std::optional<double> surface_alpha;   // unset: 2/3 in bins/steady, 4/7 in gate (alpha* for d = 2, 3)
+  double surface_normal_cos = 0.9;       // photons whose normal is further than acos(this) from x's are rejected
   SpatialKernel spatial_kernel = SpatialKernel::Epanechnikov;
   TemporalKernel temporal_kernel = TemporalKernel::Epanechnikov;
   BeamKind photon_beam_kind = BeamKind::Long;
@@ -46,6 +52,8 @@ struct Progress {
   double radius = 0.0;     // R_i of the iteration in flight or just done
   double time_half_width = 0.0;
   std::uint64_t beams = 0;
+  double surface_radius = 0.0;  // r_i of the surface photons
+  std::uint64_t surface_photons = 0;
 };
 
 // Returns false to cancel; called from the rendering thread, rate-limited.
@@ -58,6 +66,10 @@ struct RenderStats {
   std::uint64_t parallel_rejected = 0, false_positives = 0, accel_references = 0;
   double time_light_s = 0, time_build_s = 0, time_camera_s = 0, time_total_s = 0;
   double final_radius = 0, final_time_half_width = 0;
+  // Surface photons (§7): photons stored, gathers at diffuse camera hits, accepted photon terms.
+  std::uint64_t surface_photons = 0, surface_queries = 0, surface_pairs = 0;
+  double time_surface_build_s = 0;
+  double final_surface_radius = 0, final_surface_time_half_width = 0;
   double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check
 };
 
@@ -67,6 +79,7 @@ struct RenderResult {
   std::vector<float> frames;  // F x H x W x 3
   std::vector<float> early, late;  // H x W x 3: energy before / after the frame window
   std::vector<int> snapshot_iterations;
+  std::vector<double> snapshot_seconds;  // wall time since the start of the render, per snapshot
   std::vector<std::vector<float>> snapshots;  // steady averages, H x W x 3 each
   RenderStats stats;
 };
@@ -79,5 +92,15 @@ RenderResult render(const Scene& scene, const RenderSettings& settings,
 // bins/steady shrink R with gamma.
 void iteration_bandwidths(FrameMode mode, const RenderSettings& s, long iteration, double& radius,
                           double& time_half_width);
+
+// The surface photons' schedule parameter: surface_alpha, or alpha* = 4/(d + 4) for the disk
+// (d = 2) in bins/steady and the disk x time kernel (d = 3) in gate mode (§6).
+double surface_schedule_alpha(FrameMode mode, const RenderSettings& s);
+
+// Surface bandwidths of iteration i (§6): the kernel volume r^2 (bins/steady) or r^2 T (gate)
+// follows gamma_i, so r_i = r_0 gamma^(1/2) in bins/steady, and r_i = r_0 gamma^(1/3),
+// T_i = T_0 gamma^(1/3) in gate mode, where space and time shrink at the same rate.
+void surface_bandwidths(FrameMode mode, const RenderSettings& s, long iteration, double& radius,
+                        double& time_half_width);
 
 }  // namespace ptpb
