@@ -53,8 +53,8 @@ bench: setup ## Benchmarks: ray engine throughput, geometry stage against grid s
 	$(PY) benchmarks/bench_rays.py
 	@if [ -f benchmarks/bench_geometry.py ]; then $(PY) benchmarks/bench_geometry.py; fi
 
-sweep: setup ## Config sweeps over optical parameter sets (not yet available)
-	@echo "make sweep: not yet available (the sweep engine is tracked in its own issue)"
+sweep: setup ## Run a config sweep (default configs/sweeps/default.yaml on 2 cores; SWEEP=..., CORES=...)
+	$(PY) -m pipeline sweep $(or $(SWEEP),configs/sweeps/default.yaml) --cores $(or $(CORES),2)
 
 clean: ## Remove build folders and run outputs (keeps .venv)
 	rm -rf build runs $(STAMPS)/package

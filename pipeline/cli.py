@@ -1,4 +1,4 @@
-"""Command-line interface: ``python -m pipeline {validate,run,stages} ...``."""
+"""Command-line interface: ``python -m pipeline {validate,run,stages,sweep} ...``."""
 from __future__ import annotations
 
 import json
@@ -82,6 +82,34 @@ def run(
         typer.echo(f"  {result.name:<10} {result.status:<9} {took}  {result.out_dir}")
         if result.summary and result.status == "ran":
             typer.echo("             " + json.dumps(result.summary, default=str)[:300])
+
+
+@app.command(context_settings={"allow_extra_args": True})
+def sweep(
+    ctx: typer.Context,
+    sweep_file: Path = typer.Argument(..., help="Sweep YAML file (configs/sweeps/...).", dir_okay=False),
+    cores: Optional[str] = typer.Option(None, "--cores", "-c", help="Cores for local jobs (a number or 'all'); default: the profile's."),
+    profile: Optional[str] = typer.Option(None, "--profile", help="Snakemake profile: a folder, or a name under profiles/ (default, slurm)."),
+    dry_run: bool = typer.Option(False, "--dry-run", "-n", help="Print the jobs Snakemake would run or submit; run nothing."),
+) -> None:
+    """Run every point of SWEEP_FILE through the Snakemake workflow, then the sweep summary.
+
+    Arguments after `--` go to snakemake unchanged, e.g. `-- --forcerun point`.
+    """
+    from pipeline.sweep import SweepError, load_sweep, run_sweep
+
+    setup_logging(quiet=True)
+    try:
+        spec = load_sweep(sweep_file)
+        code = run_sweep(spec, cores=cores, profile=profile, dry_run=dry_run, extra=list(ctx.args))
+    except SweepError as exc:
+        typer.echo("\n".join(f"error: {line}" for line in str(exc).splitlines()), err=True)
+        raise typer.Exit(code=2) from None
+    if code != 0:
+        typer.echo(f"error: snakemake failed (exit {code}); each point's log is in {spec.folder / 'logs'}/", err=True)
+        raise typer.Exit(code=code)
+    if not dry_run:
+        typer.echo(f"\nSweep '{spec.name}': {len(spec.points)} points; report: {(spec.folder / 'report.html').resolve()}")
 
 
 def main() -> None:

@@ -1,10 +1,11 @@
-"""The pipeline's stages, in order. Each stage is a plain function of a StageContext.
+"""The pipeline's stages, in order: geometry -> scene -> reference, render -> composite -> compare.
 
-The stages of the full pipeline are geometry -> scene -> reference, render -> composite ->
-compare; this list holds the ones that are implemented. Heavy modules are imported inside the
-functions so that `python -m pipeline validate` stays fast.
+Each stage is a plain function of a StageContext that calls one function of geometry/ or render/.
+Heavy modules are imported inside the functions so that `python -m pipeline validate` stays fast.
 """
 from __future__ import annotations
+
+import json
 
 from pipeline.runner import Stage, StageContext
 
@@ -15,7 +16,64 @@ def geometry_stage(ctx: StageContext) -> dict:
     return run_geometry_stage(ctx.config.geometry, ctx.out_dir, seed=ctx.config.seed, quiet=ctx.quiet)
 
 
+def _uses_penitentes(config) -> bool:
+    return any(o.shape == "penitentes" for o in config.scene.objects)
+
+
+def scene_stage(ctx: StageContext) -> dict:
+    from render.scene_build import run_scene_stage
+
+    g = ctx.config.geometry
+    site = {"latitude": g.latitude, "day_of_year": g.start_day_of_year + g.days - 1}
+    return run_scene_stage(ctx.config.scene, ctx.out_dir, geometry_dir=ctx.inputs.get("geometry"), site=site)
+
+
+def reference_stage(ctx: StageContext) -> dict:
+    from render.mitsuba_ref import run_reference_stage
+
+    return run_reference_stage(ctx.inputs["scene"], ctx.config.reference, ctx.out_dir, seed=ctx.config.seed,
+                               quiet=ctx.quiet)
+
+
+def render_stage(ctx: StageContext) -> dict:
+    from render.ptpb_stage import run_render_stage
+
+    return run_render_stage(ctx.inputs["scene"], ctx.config.render, ctx.out_dir, seed=ctx.config.seed,
+                            threads=ctx.config.threads, quiet=ctx.quiet)
+
+
+def composite_stage(ctx: StageContext) -> dict:
+    from render.composite import run_composite_stage
+
+    return run_composite_stage(ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"],
+                               ctx.config.composite, ctx.out_dir)
+
+
+def compare_stage(ctx: StageContext) -> dict:
+    from render.compare import run_compare_stage
+    from render.composite import Film
+
+    stats = json.loads((ctx.inputs["render"] / "stats.json").read_text())
+    film = Film(stats["start_opl_m"], stats["bin_width_opl_m"], stats["frame_mode"])
+    run_root = ctx.out_dir.parent
+    return run_compare_stage(run_root, ctx.inputs["render"], ctx.inputs.get("reference"), film, ctx.out_dir,
+                             [s.name for s in STAGES], f"Run '{ctx.config.name}'")
+
+
 STAGES: list[Stage] = [
     Stage("geometry", geometry_stage, ("geometry", "seed"),
-          description="grow the penitente field, mesh it watertight, metrics and previews"),
+          description="grow the penitente field, mesh it watertight, metrics and previews",
+          enabled=_uses_penitentes),
+    Stage("scene", scene_stage, ("scene", "geometry.latitude", "geometry.start_day_of_year", "geometry.days"),
+          upstream=("geometry",),
+          description="the neutral scene description, meshes and the media's optical quantities"),
+    Stage("reference", reference_stage, ("reference", "seed"), upstream=("scene",),
+          description="Mitsuba 3 volpath steady image and mitransient frames",
+          enabled=lambda c: c.reference.steady or c.reference.transient),
+    Stage("render", render_stage, ("render", "seed", "threads"), upstream=("scene",),
+          description="our PTPB render: steady image, frames and statistics"),
+    Stage("composite", composite_stage, ("composite",), upstream=("render", "reference", "scene"),
+          description="transient videos, streak images, ours against the reference"),
+    Stage("compare", compare_stage, ("composite",), upstream=("render", "reference", "composite"),
+          description="comparison table, error-against-time plot and report.html"),
 ]

@@ -3,6 +3,8 @@ side-by-side comparisons. Pure array work plus the writers in render.video and r
 """
 from __future__ import annotations
 
+import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,6 +13,8 @@ import numpy as np
 from render.figures import relative_difference, side_by_side_still, streak_image
 from render.tonemap import display_frames, exposure_scale, to_display
 from render.video import annotate, format_time, upscale, write_mp4
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -122,3 +126,39 @@ def side_by_side(
                        still, cfg.tone_curve, title="Sum over all frames", vmax=cfg.difference_vmax)
     paths["side_by_side_still"] = still
     return paths
+
+
+def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path) -> dict:
+    """The `composite` stage: videos and streak images of our frames, and ours against the reference.
+
+    Reads ``render_dir/frames.npy`` and ``stats.json`` (the film), ``reference_dir/frames.npy`` when a
+    transient reference exists, and the camera from ``scene_dir/scene.json`` for the scale bar.
+    """
+    from render.scene import Scene, pixel_footprint
+
+    stats = json.loads((render_dir / "stats.json").read_text())
+    film = Film(stats["start_opl_m"], stats["bin_width_opl_m"], stats["frame_mode"])
+    if film.frame_mode == "steady":
+        return {"skipped": "the render is steady; there are no frames to composite"}
+    scene = Scene.load(scene_dir / "scene.json")
+    camera = scene.camera
+    distance = float(np.linalg.norm(np.subtract(camera.target, camera.origin)))
+    metres_per_pixel = pixel_footprint(camera, distance)
+    frames = np.load(render_dir / "frames.npy")
+    written = transient_videos(frames, film, cfg, out_dir, metres_per_pixel=metres_per_pixel)
+    written.update(streak_images(frames, film, cfg, out_dir))
+    reference_frames = None
+    if reference_dir is not None and (reference_dir / "frames.npy").exists():
+        reference_frames = np.load(reference_dir / "frames.npy")
+    if reference_frames is not None and reference_frames.shape == frames.shape:
+        # mitransient's frames are bin integrals; gate frames are densities per metre (ptpb.md §2).
+        ours_as_bins = frames * film.bin_width_opl if film.frame_mode == "gate" else frames
+        bins_film = Film(film.start_opl, film.bin_width_opl, "bins")
+        written.update(side_by_side(ours_as_bins, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg,
+                                    out_dir))
+        written.update(transient_videos(reference_frames, bins_film, cfg, out_dir, stem="reference_transient",
+                                        metres_per_pixel=metres_per_pixel))
+    elif reference_frames is not None:
+        log.warning("reference frames %s do not match ours %s; no side-by-side", reference_frames.shape, frames.shape)
+    return {"files": sorted(p.name for p in written.values()), "frames": int(frames.shape[0]),
+            "frame_mode": film.frame_mode}

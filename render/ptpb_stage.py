@@ -1,11 +1,12 @@
 """The `render` stage: run our PTPB renderer on a scene folder and write its outputs.
 
 Outputs in ``out_dir``: ``steady.exr`` and ``steady.npy`` (H, W, 3), ``frames.npy`` (F, H, W, 3)
-float32, and ``stats.json`` (run statistics, resolved R_0/T_0, film and time conventions).
+float32, ``snapshots.npz`` (the steady average every ``snapshot_every`` iterations, with their
+iteration counts and wall times, for error-against-time curves) and ``stats.json`` (run
+statistics, resolved R_0/T_0, film and time conventions).
 """
 from __future__ import annotations
 
-import importlib
 import json
 from pathlib import Path
 
@@ -13,6 +14,8 @@ import numpy as np
 
 from pipeline.atomic import atomic_path, save_npy_atomic, write_json_atomic
 from pipeline.schema.ptpb import PTPBConfig
+from render.exr import write_exr
+from render.ply import read_ply
 from render.ptpb import render
 
 
@@ -21,9 +24,7 @@ def _load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
         with np.load(path) as z:
             return np.asarray(z["vertices"], np.float32), np.asarray(z["faces"], np.uint32)
     if path.suffix == ".ply":
-        ply = importlib.import_module("render.ply")  # written by the scene module's owner
-        mesh = ply.read_ply(path)
-        return np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.uint32)
+        return read_ply(path)
     raise ValueError(f"{path}: meshes must be .npz (vertices, faces) or .ply")
 
 
@@ -43,24 +44,6 @@ def load_core_scene(scene_dir: Path) -> dict:
     return scene
 
 
-def _write_exr(path: Path, image: np.ndarray) -> None:
-    try:
-        exr = importlib.import_module("render.exr")
-        exr.write_exr(path, image)
-        return
-    except ModuleNotFoundError:
-        pass
-    import OpenImageIO as oiio
-
-    with atomic_path(path) as tmp:
-        spec = oiio.ImageSpec(image.shape[1], image.shape[0], 3, oiio.FLOAT)
-        out = oiio.ImageOutput.create(str(tmp))
-        if out is None or not out.open(str(tmp), spec):
-            raise RuntimeError(f"cannot write {path}: {oiio.geterror()}")
-        out.write_image(np.ascontiguousarray(image, dtype=np.float32))
-        out.close()
-
-
 def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: int, threads: int,
                      quiet: bool = False) -> dict:
     """Render the scene in ``scene_dir`` with ``cfg`` (seed and threads override the config's)."""
@@ -69,7 +52,12 @@ def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: i
     result = render(scene, cfg, progress=not quiet)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    _write_exr(out_dir / "steady.exr", result.steady)
+    write_exr(out_dir / "steady.exr", result.steady)
+    if result.snapshots:
+        with atomic_path(out_dir / "snapshots.npz") as tmp:
+            with open(tmp, "wb") as handle:
+                np.savez(handle, iterations=np.array([it for it, _ in result.snapshots]),
+                         seconds=np.array(result.snapshot_seconds), steady=np.stack([im for _, im in result.snapshots]))
     save_npy_atomic(out_dir / "steady.npy", result.steady)
     save_npy_atomic(out_dir / "frames.npy", result.frames)
     film = scene["film"]

@@ -4,7 +4,10 @@ from __future__ import annotations
 from pydantic import Field
 
 from pipeline.schema.base import StrictModel
+from pipeline.schema.composite import CompositeConfig
 from pipeline.schema.geometry import GeometryConfig
+from pipeline.schema.ptpb import PTPBConfig
+from pipeline.schema.scene import ReferenceConfig, SceneConfig
 
 
 class Config(StrictModel):
@@ -19,6 +22,10 @@ class Config(StrictModel):
     threads: int = Field(0, ge=0, le=1024, description="Worker threads for the C++ core; 0 uses every core [-].")
     runs_dir: str = Field("runs", min_length=1, description="Folder that holds run outputs, relative to the working directory [path].")
     geometry: GeometryConfig = Field(default_factory=GeometryConfig, description="The geometry stage: growing and meshing the field.")
+    scene: SceneConfig = Field(default_factory=SceneConfig, description="The scene stage: camera, lights, media, objects, film.")
+    reference: ReferenceConfig = Field(default_factory=ReferenceConfig, description="The reference stage: Mitsuba 3 volpath and mitransient.")
+    render: PTPBConfig = Field(default_factory=PTPBConfig, description="The render stage: our PTPB renderer (seed and threads come from the root).")
+    composite: CompositeConfig = Field(default_factory=CompositeConfig, description="The composite and compare stages: videos, streaks, figures, tables.")
 
 
 __all__ = ["Config", "StrictModel"]

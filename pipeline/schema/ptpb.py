@@ -88,7 +88,9 @@ class PTPBConfig(StrictModel):
         description="Long beams and queries end where the largest channel transmittance falls below this [-].",
     )
     camera_unwarp: bool = Field(False, description="Remove camera-side OPL from tau (never compare such frames with mitransient) [-].")
-    snapshot_every: int = Field(0, ge=0, description="Keep the steady average every k iterations (0: never) [-].")
+    snapshot_every: int = Field(
+        8, ge=0, description="Keep the steady average every k iterations for error-against-time curves (0: never) [-].",
+    )
     frame_mode: Optional[Literal["steady", "bins", "gate"]] = Field(
         None, description="Overrides the film's frame_mode when set [-]."
     )

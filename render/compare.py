@@ -1,0 +1,103 @@
+"""Compare our render with the reference: a table (Markdown, CSV), error-against-time plots and the
+run report. relMSE and RMSE are against the Mitsuba steady image and the mitransient frames."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.atomic import write_text_atomic
+from render.figures import error_curves
+from render.metrics import mean_radiance, relmse, rmse
+
+COLUMNS = ["renderer", "quantity", "seconds", "iterations_or_spp", "relmse", "rmse",
+           "mean_r", "mean_g", "mean_b", "peak_memory_mib"]
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def _load(folder: Path | None, name: str) -> np.ndarray | None:
+    if folder is None or not (folder / name).exists():
+        return None
+    return np.load(folder / name, allow_pickle=False)
+
+
+def _row(renderer, quantity, seconds, count, image, reference, memory) -> dict[str, Any]:
+    means = mean_radiance(image)
+    row = {"renderer": renderer, "quantity": quantity, "seconds": seconds, "iterations_or_spp": count,
+           "mean_r": means[0], "mean_g": means[1], "mean_b": means[2], "peak_memory_mib": memory,
+           "relmse": None, "rmse": None}
+    if reference is not None and reference.shape == image.shape:
+        row["relmse"] = relmse(image, reference)
+        row["rmse"] = rmse(image, reference)
+    return row
+
+
+def _fmt(value) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def write_table(rows: list[dict[str, Any]], out_dir: Path, stem: str = "comparison") -> None:
+    md = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    md += ["| " + " | ".join(_fmt(r[c]) for c in COLUMNS) + " |" for r in rows]
+    write_text_atomic(out_dir / f"{stem}.md", "\n".join(md) + "\n")
+    csv = [",".join(COLUMNS)] + [",".join("" if r[c] is None else str(r[c]) for c in COLUMNS) for r in rows]
+    write_text_atomic(out_dir / f"{stem}.csv", "\n".join(csv) + "\n")
+
+
+def compare_renders(ours_dir: Path | None, reference_dir: Path | None, film, out_dir: Path) -> dict[str, Any]:
+    ours_stats = _read_json(ours_dir / "stats.json") if ours_dir else {}
+    ref_timing = _read_json(reference_dir / "timing.json") if reference_dir else {}
+    rows: list[dict[str, Any]] = []
+    steady_ref = _load(reference_dir, "steady.npy")
+    frames_ref = _load(reference_dir, "frames.npy")
+    steady_ours = _load(ours_dir, "steady.npy")
+    frames_ours = _load(ours_dir, "frames.npy")
+    ours_seconds = ours_stats.get("seconds") or ours_stats.get("time_total_s")
+    ours_iterations = ours_stats.get("iterations")
+    ours_memory = ours_stats.get("peak_memory_mib")
+    if steady_ours is not None:
+        rows.append(_row("ours (PTPB)", "steady", ours_seconds, ours_iterations, steady_ours, steady_ref, ours_memory))
+    if frames_ours is not None:
+        as_bins = frames_ours * film.bin_width_opl if film.frame_mode == "gate" else frames_ours
+        rows.append(_row("ours (PTPB)", f"frames ({film.frame_mode})", ours_seconds, ours_iterations, as_bins,
+                         frames_ref, ours_memory))
+    if steady_ref is not None:
+        steady_t = ref_timing.get("steady", {})
+        rows.append(_row("Mitsuba volpath", "steady", steady_t.get("seconds"), steady_t.get("spp"), steady_ref,
+                         None, steady_t.get("peak_memory_mib")))
+    if frames_ref is not None:
+        transient_t = ref_timing.get("transient", {})
+        rows.append(_row("mitransient", "frames (bins)", transient_t.get("seconds"), transient_t.get("spp"),
+                         frames_ref, None, transient_t.get("peak_memory_mib")))
+    if not rows:
+        raise FileNotFoundError("compare found neither our render nor a reference to tabulate")
+    write_table(rows, out_dir)
+    series = {}
+    snapshots = ours_dir / "snapshots.npz" if ours_dir else None
+    if steady_ref is not None and snapshots is not None and snapshots.exists():
+        with np.load(snapshots) as z:
+            series["ours (PTPB), steady"] = [
+                {"seconds": float(t), "iterations": int(i), "relmse": relmse(image, steady_ref)}
+                for i, t, image in zip(z["iterations"], z["seconds"], z["steady"])]
+    if series:
+        error_curves(series, out_dir / "error_vs_time.png")
+    return {"rows": rows, "error_curves": {k: v for k, v in series.items()}}
+
+
+def run_compare_stage(run_root: Path, ours_dir: Path | None, reference_dir: Path | None, film, out_dir: Path,
+                      stage_names, title: str) -> dict:
+    """The `compare` stage: the table, the error plot and ``report.html`` linking every stage's files."""
+    from render.report import write_report
+
+    result = compare_renders(ours_dir, reference_dir, film, out_dir)
+    write_report(out_dir / "report.html", run_root, [n for n in stage_names if n != "compare"], title)
+    return {"rows": [{k: r[k] for k in ("renderer", "quantity", "seconds", "relmse")} for r in result["rows"]]}
