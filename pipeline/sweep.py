@@ -1,0 +1,767 @@
+"""Config sweeps: runs of the pipeline that differ in a few keys, run by the Snakemake workflow.
+
+A sweep file names a base config and either a list of points or a grid of overrides:
+
+    description: the thesis's six optical sets
+    base: base_small.yaml          # resolved next to the sweep file, then in configs/
+    threads: 1                     # C++ core threads per point (the Snakemake rule's threads)
+    set: {render.iterations: 8}    # overrides for every point
+    points:
+      - name: set1
+        set: {scene.media.snow.preset: thesis_set_1}
+
+    grid:                          # instead of points: every combination of the values
+      scene.media.snow.physical.optical_radius: [0.0005, 0.001]
+      scene.media.snow.physical.density: {light: 350, dense: 550}   # a mapping names its values
+
+Overrides are dotted keys with the meaning of ``--set key=value`` (``set`` may also be a list of
+``key=value`` strings), and every key must exist in the base config. A point's run is
+``<sweep>-<point>`` and writes into ``runs/<that>/``. Its resolved config goes to
+``runs/sweeps/<sweep>/points/<point>.yaml`` and is rewritten only when its content changes, so
+Snakemake's modification-time check re-runs exactly the points that changed; inside a point the
+stage runner's manifests skip the stages whose inputs did not change.
+
+``ground_truth: <point>`` measures every point's errors against that point's reference renders
+instead of against its own (equal-time comparisons). In the error-against-time plot a point that
+renders its own reference then stands for the reference renderer, any other point for ours.
+
+``python -m pipeline.sweep summarize runs/sweeps/<sweep>/workflow.yaml`` writes the sweep summary:
+the table (CSV, Markdown, HTML), the poster grid, the error-against-time plot and ``report.html``.
+"""
+from __future__ import annotations
+
+import csv
+import difflib
+import html
+import importlib.util
+import io
+import itertools
+import json
+import logging
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Optional
+
+import yaml
+from pydantic import Field, ValidationError, field_validator
+
+from pipeline.atomic import write_text_atomic
+from pipeline.config import (
+    ConfigError, apply_overrides, format_key_path, format_validation_error, load_raw, parse_override, subtree,
+)
+from pipeline.paths import CONFIGS_DIR, PROJECT_ROOT
+from pipeline.schema import Config
+from pipeline.schema.base import StrictModel
+
+log = logging.getLogger(__name__)
+
+SNAKEFILE = Path(__file__).resolve().parent / "workflow" / "Snakefile"
+PROFILES_DIR = PROJECT_ROOT / "profiles"
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
+# Keys the sweep itself decides for every point.
+RESERVED_KEYS = {
+    "name": "the sweep names each run '<sweep>-<point>'",
+    "threads": "threads come from the sweep's 'threads' key (or Snakemake's set-threads)",
+}
+
+
+class SweepError(ConfigError):
+    """A sweep file that cannot be used; one line per problem, each naming the file, point and key."""
+
+
+def _as_assignments(value: Any) -> list[str]:
+    """``{key: value}`` or ``["key=value", ...]`` as ``--set`` strings."""
+    if value is None:
+        return []
+    if isinstance(value, dict):
+        # JSON is YAML, so parse_override reads each value back unchanged.
+        return [f"{key}={json.dumps(item)}" for key, item in value.items()]
+    if isinstance(value, list) and all(isinstance(item, str) for item in value):
+        return list(value)
+    raise ValueError("must be a mapping of dotted keys to values, or a list of 'key=value' strings")
+
+
+class PointSpec(StrictModel):
+    """One point of a sweep file (key path points[i].<field>)."""
+
+    name: str = Field(..., pattern=NAME_PATTERN, max_length=80, description="Point name; its run is <sweep>-<name> [-].")
+    description: str = Field("", description="What the point is, for the report [-].")
+    set: list[str] = Field(default_factory=list, description="Overrides of this point, dotted keys as --set [-].")
+
+    _normalise_set = field_validator("set", mode="before")(_as_assignments)
+
+
+class SweepFile(StrictModel):
+    """A sweep file: a base config and a list of points or a grid of overrides."""
+
+    name: Optional[str] = Field(None, pattern=NAME_PATTERN, max_length=60, description="Sweep name; default the file stem [-].")
+    description: str = Field("", description="What the sweep compares, for the report [-].")
+    base: str = Field(..., min_length=1, description="Base config, next to the sweep file or in configs/ [path].")
+    threads: int = Field(1, ge=1, le=1024, description="C++ core threads of each point; the Snakemake rule's threads [-].")
+    set: list[str] = Field(default_factory=list, description="Overrides of every point, dotted keys as --set [-].")
+    points: Optional[list[PointSpec]] = Field(None, description="The points, each a name and its overrides [-].")
+    grid: Optional[dict[str, Any]] = Field(
+        None, description="Dotted key -> list of values (or mapping label -> value); one point per combination [-]."
+    )
+    ground_truth: Optional[str] = Field(
+        None, description="Point whose reference renders every point's error is measured against [-]."
+    )
+
+    _normalise_set = field_validator("set", mode="before")(_as_assignments)
+
+    @field_validator("grid")
+    @classmethod
+    def _grid_axes(cls, grid):
+        for key, values in (grid or {}).items():
+            if not isinstance(values, (list, dict)) or not values:
+                raise ValueError(f"grid key '{key}' needs a non-empty list of values or mapping of label to value")
+        return grid
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    name: str
+    overrides: tuple[str, ...]  # the point's own, applied after the sweep's common ones
+    config: Config
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class Sweep:
+    path: Path
+    name: str
+    description: str
+    base: Path
+    threads: int
+    common: tuple[str, ...]
+    points: tuple[SweepPoint, ...]
+    ground_truth: Optional[str]
+    runs_dir: Path  # as configured: relative paths are relative to the working directory
+
+    @property
+    def folder(self) -> Path:
+        """``runs/sweeps/<sweep>``: point configs, logs, Snakemake's state and the summary."""
+        return self.runs_dir / "sweeps" / self.name
+
+
+# ---------------------------------------------------------------- loading and validation
+
+def _sweep_file_errors(path: Path, error: ValidationError, document: dict) -> list[str]:
+    """One line per problem; ``points.2.sett`` becomes ``point 'name': sett``."""
+    raw_points = document.get("points") if isinstance(document.get("points"), list) else []
+    lines = []
+    for line in format_validation_error(error, str(path)).splitlines()[1:]:
+        match = re.match(r"\s*points\.(\d+)[.:]\s*", line)
+        if match:
+            index = int(match.group(1))
+            given = raw_points[index] if index < len(raw_points) else None
+            name = given.get("name") if isinstance(given, dict) else None
+            who = f"point '{name}'" if isinstance(name, str) else f"point {index + 1}"
+            line = f"{who}: {line[match.end():]}"
+        lines.append(f"{path}: {line.strip()}")
+    return lines
+
+
+def _resolve_base(name: str, sweep_path: Path) -> Path:
+    for candidate in (sweep_path.parent / name, CONFIGS_DIR / name):
+        if candidate.is_file():
+            return candidate.resolve()
+    raise SweepError(f"{sweep_path}: base '{name}' was found neither next to the sweep file nor in {CONFIGS_DIR}")
+
+
+def _grid_points(grid: dict[str, Any]) -> list[PointSpec]:
+    """Every combination of the grid's values, named ``<leaf>-<label>_<leaf>-<label>``."""
+    axes = []
+    for key, values in grid.items():
+        labelled = values.items() if isinstance(values, dict) else [(_label(v), v) for v in values]
+        axes.append([(key, str(label), value) for label, value in labelled])
+    points = []
+    for combination in itertools.product(*axes):
+        name = "_".join(f"{key.split('.')[-1]}-{label}" for key, label, _ in combination)
+        points.append(PointSpec(name=name, set=[f"{key}={json.dumps(value)}" for key, _, value in combination]))
+    return points
+
+
+def _label(value: Any) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(value)).strip("_.") or "x"
+
+
+def _check_key_exists(dump: dict, keys: list[str]) -> Optional[str]:
+    """Why the dotted key is not a key of the resolved base config, or None when it is.
+
+    The walk stops at an unset optional section (``physical: null``): pydantic checks below it.
+    """
+    node: Any = dump
+    for depth, key in enumerate(keys):
+        if not isinstance(node, dict):
+            return None
+        if key not in node:
+            where = format_key_path(keys[:depth]) if depth else "the top level"
+            close = difflib.get_close_matches(key, list(node), n=1)
+            hint = f"did you mean '{close[0]}'?" if close else f"its keys: {', '.join(sorted(node)) or 'none'}"
+            return f"the base config has no key '{key}' under {where} ({hint})"
+        node = node[key]
+    return None
+
+
+def _validate_point(raw: dict, where: str) -> Config:
+    try:
+        return Config.model_validate(raw)
+    except ValidationError as exc:
+        lines = format_validation_error(exc, where).splitlines()[1:]
+        raise SweepError("\n".join(f"{where}: {line.strip()}" for line in lines)) from None
+
+
+def _check_overrides(assignments, base_dump: dict, where: str) -> list[str]:
+    errors = []
+    for assignment in assignments:
+        try:
+            keys, _ = parse_override(assignment)
+        except ConfigError as exc:
+            errors.append(f"{where}: {exc}")
+            continue
+        key = ".".join(keys)
+        if key in RESERVED_KEYS:
+            errors.append(f"{where}: {key}: cannot be set by a sweep point: {RESERVED_KEYS[key]}")
+            continue
+        problem = _check_key_exists(base_dump, keys)
+        if problem:
+            errors.append(f"{where}: {key}: {problem}")
+    return errors
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read and validate a sweep file and every point's config; nothing runs before this passes."""
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except FileNotFoundError:
+        raise SweepError(f"sweep file not found: {path}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise SweepError(f"{path}{where}: invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    if not isinstance(document, dict):
+        raise SweepError(f"{path}: a sweep file must be a YAML mapping (base, points or grid, ...)")
+    try:
+        spec = SweepFile.model_validate(document)
+    except ValidationError as exc:
+        raise SweepError("\n".join(_sweep_file_errors(path, exc, document))) from None
+    if (spec.points is None) == (spec.grid is None):
+        raise SweepError(f"{path}: give exactly one of 'points' (a list) or 'grid' (key -> values)")
+    name = spec.name or path.stem
+    if not re.match(NAME_PATTERN, name):
+        raise SweepError(f"{path}: the sweep name '{name}' (the file stem) must match {NAME_PATTERN}; set 'name'")
+    specs = spec.points if spec.points is not None else _grid_points(spec.grid)
+    if not specs:
+        raise SweepError(f"{path}: the sweep has no points")
+    seen: dict[str, int] = {}
+    for index, point in enumerate(specs, 1):
+        if point.name in seen:
+            hint = "; name the grid's values with a mapping (label: value)" if spec.grid else ""
+            raise SweepError(f"{path}: point '{point.name}' appears twice (points {seen[point.name]} and {index}); "
+                             f"point names must be unique{hint}")
+        seen[point.name] = index
+
+    base_path = _resolve_base(spec.base, path)
+    try:
+        base_raw = load_raw(base_path)
+    except ConfigError as exc:
+        raise SweepError(f"{path}: base {base_path}: {exc}") from None
+    base_raw["name"] = f"{name}-base"
+    base_config = _validate_point(base_raw, f"{path}: base {spec.base}")
+    errors = _check_overrides(spec.set, base_config.model_dump(mode="json"), f"{path}: set")
+    if errors:
+        raise SweepError("\n".join(errors))
+    common_raw = apply_overrides(base_raw, spec.set)
+    common_config = _validate_point(common_raw, f"{path}: set")
+    common_dump = common_config.model_dump(mode="json")
+
+    points, errors = [], []
+    for point in specs:
+        where = f"{path}: point '{point.name}'"
+        run_name = f"{name}-{point.name}"
+        if len(run_name) > 120:
+            errors.append(f"{where}: the run name '{run_name}' is longer than 120 characters; shorten the names")
+            continue
+        problems = _check_overrides(point.set, common_dump, where)
+        if problems:
+            errors.extend(problems)
+            continue
+        raw = apply_overrides(common_raw, point.set)
+        raw["name"] = run_name
+        try:
+            config = _validate_point(raw, where)
+        except SweepError as exc:
+            errors.append(str(exc))
+            continue
+        if config.runs_dir != common_config.runs_dir:
+            errors.append(f"{where}: runs_dir: every point writes under the same runs_dir; set it in the sweep's 'set'")
+            continue
+        points.append(SweepPoint(point.name, tuple(point.set), config, point.description))
+    if errors:
+        raise SweepError("\n".join(errors))
+    if spec.ground_truth is not None and spec.ground_truth not in seen:
+        raise SweepError(f"{path}: ground_truth: '{spec.ground_truth}' is not a point of the sweep "
+                         f"({', '.join(seen)})")
+    return Sweep(path=path, name=name, description=spec.description.strip(), base=base_path, threads=spec.threads,
+                 common=tuple(spec.set), points=tuple(points), ground_truth=spec.ground_truth,
+                 runs_dir=Path(common_config.runs_dir))
+
+
+# ---------------------------------------------------------------- files for Snakemake
+
+def write_if_changed(path: Path, text: str) -> bool:
+    """Write ``text`` atomically unless the file already holds it (its mtime then stays); True if written."""
+    if path.is_file() and path.read_text(encoding="utf-8") == text:
+        return False
+    write_text_atomic(path, text)
+    return True
+
+
+def point_config_text(sweep: Sweep, point: SweepPoint) -> str:
+    header = f"# Point '{point.name}' of sweep '{sweep.name}', written by `python -m pipeline sweep`; do not edit.\n"
+    header += "".join(f"# set {item}\n" for item in (*sweep.common, *point.overrides))
+    return header + yaml.safe_dump(point.config.model_dump(mode="json"), sort_keys=False)
+
+
+def target_stage(sweep: Sweep) -> str:
+    """The last stage enabled in every point: its manifest is each point's Snakemake output."""
+    from pipeline.stages import STAGES
+
+    enabled = [s.name for s in STAGES if all(s.enabled(p.config) for p in sweep.points)]
+    return enabled[-1]
+
+
+def prepare(sweep: Sweep, workdir: Path | None = None) -> Path:
+    """Write the point configs and the workflow's config file; return the latter's path."""
+    workdir = (workdir or Path.cwd()).resolve()
+    folder = (workdir / sweep.folder).resolve()
+    written = [p.name for p in sweep.points
+               if write_if_changed(folder / "points" / f"{p.name}.yaml", point_config_text(sweep, p))]
+    if written:
+        log.info("sweep %s: point configs written for %s", sweep.name, ", ".join(written))
+    names = {p.name for p in sweep.points}
+    for stale in (folder / "points").glob("*.yaml"):
+        if stale.stem not in names:  # a point removed from the sweep file; its run folder stays
+            stale.unlink()
+    spec = {
+        "sweep": sweep.name,
+        "sweep_file": str(sweep.path.resolve()),
+        "description": sweep.description,
+        "folder": str(folder),
+        "workdir": str(workdir),
+        "runs_dir": str((workdir / sweep.runs_dir).resolve()),
+        "python": sys.executable,
+        "threads": sweep.threads,
+        "target_stage": target_stage(sweep),
+        "ground_truth": sweep.ground_truth,
+        "common": list(sweep.common),
+        "points": {p.name: {"overrides": list(p.overrides), "description": p.description} for p in sweep.points},
+    }
+    workflow_yaml = folder / "workflow.yaml"
+    write_if_changed(workflow_yaml, "# Written by `python -m pipeline sweep`: the Snakemake workflow's config.\n"
+                     + yaml.safe_dump(spec, sort_keys=False))
+    return workflow_yaml
+
+
+def resolve_profile(profile: Optional[str]) -> Path:
+    """A profile folder as given, or by name under the project's profiles/ (default: profiles/default)."""
+    candidate = Path(profile) if profile else PROFILES_DIR / "default"
+    if not candidate.is_dir() and profile and (PROFILES_DIR / profile).is_dir():
+        candidate = PROFILES_DIR / profile
+    if not (candidate / "config.yaml").is_file():
+        known = ", ".join(sorted(p.name for p in PROFILES_DIR.iterdir() if (p / "config.yaml").is_file()))
+        raise SweepError(f"profile '{profile}' is neither a folder with a config.yaml nor one of the project's "
+                         f"profiles ({known})")
+    return candidate.resolve()
+
+
+def snakemake_command(workflow_yaml: Path, cores: Optional[str] = None, profile: Optional[str] = None,
+                      dry_run: bool = False, extra: tuple[str, ...] | list[str] = ()) -> list[str]:
+    spec = yaml.safe_load(workflow_yaml.read_text(encoding="utf-8"))
+    command = [sys.executable, "-m", "snakemake", "--snakefile", str(SNAKEFILE), "--directory", spec["folder"],
+               "--configfile", str(workflow_yaml), "--workflow-profile", "none",
+               "--profile", str(resolve_profile(profile))]
+    if cores:
+        command += ["--cores", str(cores)]
+    if dry_run:
+        command.append("--dry-run")
+    return command + list(extra)
+
+
+def run_sweep(sweep: Sweep, cores: Optional[str] = None, profile: Optional[str] = None, dry_run: bool = False,
+              extra: tuple[str, ...] | list[str] = ()) -> int:
+    """Run the sweep's Snakemake workflow (Snakemake prints to this process's terminal); its exit code."""
+    if importlib.util.find_spec("snakemake") is None:
+        raise SweepError("snakemake is not installed in this environment; install requirements.lock into it")
+    workflow_yaml = prepare(sweep)
+    command = snakemake_command(workflow_yaml, cores, profile, dry_run, extra)
+    log.info("running %s", " ".join(command))
+    return subprocess.run(command, check=False).returncode
+
+
+# ---------------------------------------------------------------- summary
+
+@dataclass
+class _PointFiles:
+    """Reads a point's stage outputs; a missing file of an enabled stage logs a warning and gives None."""
+
+    name: str
+    run_dir: Path
+    enabled: set[str]
+
+    def path(self, stage: str, name: str) -> Optional[Path]:
+        if stage not in self.enabled:
+            return None
+        path = self.run_dir / stage / name
+        if not path.is_file():
+            log.warning("sweep summary: point '%s': %s is missing; its cells stay empty", self.name, path)
+            return None
+        return path
+
+    def read_json(self, stage: str, name: str) -> dict:
+        path = self.path(stage, name)
+        if path is None:
+            return {}
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            log.warning("sweep summary: point '%s': cannot read %s (%s); its cells stay empty", self.name, path, exc)
+            return {}
+
+    def read_array(self, stage: str, name: str):
+        import numpy as np
+
+        path = self.path(stage, name)
+        if path is None:
+            return None
+        try:
+            return np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            log.warning("sweep summary: point '%s': cannot read %s (%s)", self.name, path, exc)
+            return None
+
+
+def _number(value: Any) -> Optional[float]:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if number == number and abs(number) != float("inf") else None
+
+
+def _compare_errors(files: _PointFiles) -> dict[str, Optional[float]]:
+    """relMSE of ours (steady, frames) against the point's own reference, from compare/comparison.csv."""
+    errors = {"relmse_steady": None, "relmse_frames": None}
+    path = files.path("compare", "comparison.csv")
+    if path is None:
+        return errors
+    with open(path, newline="", encoding="utf-8") as handle:
+        for row in csv.DictReader(handle):
+            if not row.get("renderer", "").startswith("ours"):
+                continue
+            key = "relmse_steady" if row.get("quantity") == "steady" else "relmse_frames"
+            errors[key] = _number(row.get("relmse"))
+    return errors
+
+
+def _relmse(estimate, reference, what: str, point: str) -> Optional[float]:
+    from render.metrics import relmse
+
+    if estimate is None or reference is None:
+        return None
+    if estimate.shape != reference.shape:
+        log.warning("sweep summary: point '%s': %s has shape %s, the ground truth %s; no error computed",
+                    point, what, estimate.shape, reference.shape)
+        return None
+    return relmse(estimate, reference)
+
+
+def _frames_as_bins(frames, stats: dict):
+    # Gate frames are densities per metre of OPL; times the bin width they compare with bins (as render/compare.py).
+    if frames is None or stats.get("frame_mode") != "gate" or not stats.get("bin_width_opl_m"):
+        return frames
+    return frames * stats["bin_width_opl_m"]
+
+
+def _triple_columns(prefix: str, values) -> dict[str, Optional[float]]:
+    values = values if isinstance(values, (list, tuple)) and len(values) == 3 else [None] * 3
+    return {f"{prefix}_{channel}": _number(v) for channel, v in zip("rgb", values)}
+
+
+def _input_value(dump: dict, key: str) -> Any:
+    """The point's resolved value of a dotted key, for the table (text unless a number)."""
+    try:
+        value = subtree(dump, key)
+    except (KeyError, TypeError):
+        return None
+    if value is None or isinstance(value, str) or (isinstance(value, (int, float)) and not isinstance(value, bool)):
+        return value
+    return json.dumps(value)
+
+
+def _point_row(spec: dict, name: str, input_keys: list[str],
+               truth: Optional[dict]) -> tuple[dict[str, Any], _PointFiles, dict]:
+    """One row: the point's inputs (every key some point overrides), times, errors, albedo, optics."""
+    from pipeline.config import load_config
+    from pipeline.stages import STAGES
+
+    run_dir = Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}"
+    try:
+        config = load_config(Path(spec["folder"]) / "points" / f"{name}.yaml")
+        enabled, dump = {s.name for s in STAGES if s.enabled(config)}, config.model_dump(mode="json")
+    except ConfigError as exc:
+        log.warning("sweep summary: point '%s': its config no longer loads (%s); reading what is there", name, exc)
+        enabled, dump = {s.name for s in STAGES}, {}
+    files = _PointFiles(name, run_dir, enabled)
+    row: dict[str, Any] = {"point": name, **{key: _input_value(dump, key) for key in input_keys}}
+    stats = files.read_json("render", "stats.json")
+    timing = files.read_json("reference", "timing.json")
+    steady_timing, transient_timing = timing.get("steady") or {}, timing.get("transient") or {}
+    row.update({
+        "frame_mode": stats.get("frame_mode"),
+        "render_s": _number(stats.get("time_total_s", stats.get("seconds"))),
+        "iterations": stats.get("iterations"),
+    })
+    extras = {"steady_timing": steady_timing, "transient_timing": transient_timing}
+    row["reference_steady_s"] = _number(steady_timing.get("seconds"))
+    row["reference_transient_s"] = _number(transient_timing.get("seconds"))
+    if truth is None:
+        row.update(_compare_errors(files))
+    else:
+        ours_steady, ours_frames = files.read_array("render", "steady.npy"), files.read_array("render", "frames.npy")
+        row["relmse_steady"] = _relmse(ours_steady, truth["steady"], "render/steady.npy", name)
+        row["relmse_frames"] = _relmse(_frames_as_bins(ours_frames, stats), truth["frames"], "render/frames.npy", name)
+        row["reference_relmse_steady"] = row["reference_relmse_frames"] = None
+        if name != spec["ground_truth"]:
+            own_steady = files.read_array("reference", "steady.npy") if steady_timing else None
+            own_frames = files.read_array("reference", "frames.npy") if transient_timing else None
+            row["reference_relmse_steady"] = _relmse(own_steady, truth["steady"], "reference/steady.npy", name)
+            row["reference_relmse_frames"] = _relmse(own_frames, truth["frames"], "reference/frames.npy", name)
+    metrics = files.read_json("geometry", "metrics.json").get("metrics", {})
+    row["field_albedo"] = _number(metrics.get("field_albedo"))
+    for medium, entry in files.read_json("scene", "optics.json").items():
+        derived = entry.get("derived", {}) if isinstance(entry, dict) else {}
+        row.update(_triple_columns(f"{medium}_diffuse_albedo", derived.get("diffuse_albedo")))
+        row.update(_triple_columns(f"{medium}_efolding_depth_m", derived.get("efolding_depth")))
+    return row, files, extras
+
+
+def _overrides_for_people(assignments: list[str]) -> list[tuple[str, str]]:
+    """``("scene.media.snow.preset", "thesis_set_1")`` for ``scene.media.snow.preset="thesis_set_1"``."""
+    pairs = []
+    for assignment in assignments:
+        keys, value = parse_override(assignment)
+        pairs.append((".".join(keys), value if isinstance(value, str) else json.dumps(value)))
+    return pairs
+
+
+def _format_cell(value: Any, markdown: bool) -> str:
+    if value is None:
+        return ""
+    text = f"{value:.4g}" if isinstance(value, float) else str(value)
+    return text.replace("|", "/") if markdown else text
+
+
+def write_table(rows: list[dict[str, Any]], folder: Path, title: str) -> dict[str, Path]:
+    """summary.csv, summary.md and summary.html: one row per point, the union of the rows' columns."""
+    from render.report import STYLE, markdown_table_to_html
+
+    columns: list[str] = []
+    for row in rows:
+        columns += [c for c in row if c not in columns]
+    md_lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    md_lines += ["| " + " | ".join(_format_cell(r.get(c), True) for c in columns) + " |" for r in rows]
+    markdown = "\n".join(md_lines) + "\n"
+    paths = {"md": folder / "summary.md", "csv": folder / "summary.csv", "html": folder / "summary.html"}
+    write_text_atomic(paths["md"], markdown)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    # Full precision in the CSV; four digits for people in Markdown and HTML.
+    writer.writerows([["" if r.get(c) is None else repr(r[c]) if isinstance(r[c], float) else r[c] for c in columns]
+                      for r in rows])
+    write_text_atomic(paths["csv"], buffer.getvalue())
+    write_text_atomic(paths["html"], _page(title, STYLE, markdown_table_to_html(markdown)))
+    return paths
+
+
+def _page(title: str, style: str, body: str) -> str:
+    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+            f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n")
+
+
+def write_poster(points: list[tuple[str, Any, str]], path: Path, title: str) -> None:
+    """The poster grid of our steady renders; points whose image shape differs from the first are left out."""
+    from render.figures import poster_grid
+
+    images = [(name, image, label) for name, image, label in points if image is not None]
+    if images:
+        shape = images[0][1].shape
+        for name, image, _ in images:
+            if image.shape != shape:
+                log.warning("sweep summary: point '%s': its render is %s, not %s; left out of the poster",
+                            name, image.shape, shape)
+        images = [item for item in images if item[1].shape == shape]
+    if not images:
+        log.warning("sweep summary: no steady render found; the poster is a placeholder")
+        import matplotlib.pyplot as plt
+
+        from pipeline.atomic import atomic_path
+
+        fig = plt.figure(figsize=(4, 1))
+        fig.text(0.5, 0.5, "no steady render found", ha="center", va="center")
+        for target in (path, path.with_suffix(".pdf")):
+            with atomic_path(target) as tmp:
+                fig.savefig(tmp)
+        plt.close(fig)
+        return
+    poster_grid([i for _, i, _ in images], [label for _, _, label in images], path,
+                columns=min(4, len(images)), title=title)
+
+
+def _error_series(spec: dict, rows: list[dict], extras: dict[str, dict], files: dict[str, _PointFiles],
+                  truth: Optional[dict]) -> dict[str, list[dict[str, float]]]:
+    """With a ground truth: one line per method across points; without: each point's convergence
+    (its steady snapshots against its own steady reference)."""
+    import numpy as np
+
+    from render.metrics import relmse
+
+    series: dict[str, list[dict[str, float]]] = {}
+
+    def add(label, seconds, count, error):
+        if seconds and count and error:
+            series.setdefault(label, []).append({"seconds": seconds, "iterations": count, "relmse": error})
+
+    if truth is not None:
+        for row in rows:
+            extra = extras[row["point"]]
+            if row["point"] == spec["ground_truth"]:
+                continue
+            if extra["steady_timing"] or extra["transient_timing"]:
+                # A point that renders its own reference measures the reference renderer.
+                add("mitransient, frames", row.get("reference_transient_s"), extra["transient_timing"].get("spp"),
+                    row.get("reference_relmse_frames"))
+                add("Mitsuba volpath, steady", row.get("reference_steady_s"), extra["steady_timing"].get("spp"),
+                    row.get("reference_relmse_steady"))
+                continue
+            mode = row.get("frame_mode") or "?"
+            add(f"ours ({mode}), frames", row.get("render_s"), row.get("iterations"), row.get("relmse_frames"))
+            add(f"ours ({mode}), steady", row.get("render_s"), row.get("iterations"), row.get("relmse_steady"))
+        for points in series.values():
+            points.sort(key=lambda p: p["seconds"])
+        return series
+    for row in rows:
+        point_files = files[row["point"]]
+        reference = point_files.read_array("reference", "steady.npy") if extras[row["point"]]["steady_timing"] else None
+        snapshots = point_files.run_dir / "render" / "snapshots.npz"
+        if reference is None or not snapshots.is_file():
+            continue
+        with np.load(snapshots) as z:
+            for iterations, seconds, image in zip(z["iterations"], z["seconds"], z["steady"]):
+                if image.shape == reference.shape:
+                    add(row["point"], float(seconds), int(iterations), relmse(image, reference))
+    return series
+
+
+def _report(spec: dict, rows: list[dict], table_md: Path, folder: Path, has_error_plot: bool) -> str:
+    from render.report import STYLE, markdown_table_to_html
+
+    rel = lambda p: html.escape(os.path.relpath(p, folder))  # noqa: E731
+    truth = spec.get("ground_truth")
+    against = (f"the reference renders of point '{truth}'" if truth else "each point's own reference")
+    parts = []
+    if spec.get("description"):
+        parts.append(f"<p>{html.escape(spec['description'])}</p>")
+    parts.append(f"<p>Sweep file <code>{html.escape(spec['sweep_file'])}</code>; {len(rows)} points; "
+                 f"errors (relMSE) are against {html.escape(against)}. "
+                 f"Regenerate with <code>python -m pipeline sweep {html.escape(spec['sweep_file'])}</code>.</p>")
+    if spec.get("common"):
+        parts.append("<p>Every point sets: " + ", ".join(f"<code>{html.escape(key)}={html.escape(value)}</code>"
+                                                        for key, value in _overrides_for_people(spec["common"]))
+                     + "</p>")
+    parts.append("<h2>Summary</h2><div style='overflow-x: auto'>"
+                 + markdown_table_to_html(table_md.read_text(encoding="utf-8")) + "</div>")
+    parts.append("<p>" + " · ".join(f'<a href="{n}">{n}</a>' for n in ("summary.csv", "summary.md", "summary.html"))
+                 + "</p>")
+    parts.append('<h2>Poster</h2><figure><a href="poster.pdf"><img src="poster.png" alt="poster grid"></a>'
+                 "<figcaption>ours, steady, one exposure for all points</figcaption></figure>")
+    if has_error_plot:
+        parts.append('<h2>Error against time</h2><figure><a href="error_vs_time.pdf">'
+                     '<img src="error_vs_time.png" alt="error against time"></a></figure>')
+    items = []
+    for row in rows:
+        name = row["point"]
+        run = Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}"
+        links = [f'<a href="{rel(run / "compare" / "report.html")}">run report</a>',
+                 f'<a href="{rel(folder / "points" / f"{name}.yaml")}">config</a>',
+                 f'<a href="{rel(folder / "logs" / f"{name}.log")}">log</a>']
+        overrides = ", ".join(f"<code>{html.escape(key)}={html.escape(value)}</code>"
+                              for key, value in _overrides_for_people(spec["points"][name]["overrides"]))
+        description = html.escape(spec["points"][name].get("description") or "")
+        items.append(f"<li><b>{html.escape(name)}</b> {description} {overrides} — {' · '.join(links)}</li>")
+    parts.append("<h2>Points</h2><ul>" + "".join(items) + "</ul>")
+    return _page(f"Sweep '{spec['sweep']}'", STYLE, "\n".join(parts))
+
+
+def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
+    """The sweep summary from the points' stage outputs; missing files give empty cells and warnings."""
+    spec = yaml.safe_load(Path(workflow_yaml).read_text(encoding="utf-8"))
+    folder = Path(spec["folder"])
+    truth = None
+    if spec.get("ground_truth"):
+        name = spec["ground_truth"]
+        truth_files = _PointFiles(name, Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}", {"reference"})
+        truth = {"steady": truth_files.read_array("reference", "steady.npy"),
+                 "frames": truth_files.read_array("reference", "frames.npy")}
+    input_keys = list(dict.fromkeys(key for point in spec["points"].values()
+                                    for key, _ in _overrides_for_people(point["overrides"])))
+    rows, extras, files, images = [], {}, {}, []
+    for name in spec["points"]:
+        row, point_files, extra = _point_row(spec, name, input_keys, truth)
+        rows.append(row)
+        extras[name], files[name] = extra, point_files
+        label = name + "".join(f"\n{key.split('.')[-1]}={value}" for key, value
+                               in _overrides_for_people(spec["points"][name]["overrides"]) if value != name)
+        images.append((name, point_files.read_array("render", "steady.npy"), label))
+    title = f"Sweep '{spec['sweep']}'"
+    paths = write_table(rows, folder, title)
+    write_poster(images, folder / "poster.png", f"{title}: ours, steady")
+    paths["poster"] = folder / "poster.png"
+    series = _error_series(spec, rows, extras, files, truth)
+    error_plot = folder / "error_vs_time.png"
+    if series:
+        from render.figures import error_curves
+
+        error_curves(series, error_plot)
+        paths["error_plot"] = error_plot
+    else:
+        log.warning("sweep summary: no errors against a reference to plot; no error_vs_time.png")
+        for stale in (error_plot, error_plot.with_suffix(".pdf")):
+            stale.unlink(missing_ok=True)
+    paths["report"] = write_text_atomic(folder / "report.html", _report(spec, rows, paths["md"], folder, bool(series)))
+    return paths
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pipeline.sweep summarize WORKFLOW_YAML``: the summary rule of the workflow."""
+    from pipeline.log import setup_logging
+
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 2 or argv[0] != "summarize":
+        print("usage: python -m pipeline.sweep summarize runs/sweeps/<sweep>/workflow.yaml", file=sys.stderr)
+        return 2
+    setup_logging(quiet=False)
+    paths = write_summary(argv[1])
+    print(f"sweep summary: {paths['report']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
