@@ -140,3 +140,27 @@ def poster_grid(
     if title:
         fig.suptitle(title)
     return _save(fig, path, pdf=True)
+
+
+def rendered_image(image: np.ndarray, path: Path, title: str, curve: ToneCurve = "filmic",
+                   percentile: float = 99.5) -> list[Path]:
+    """One tone-mapped render with a title, e.g. a stage's steady image."""
+    from render.tonemap import exposure_scale
+
+    image = np.asarray(image)
+    height, width = image.shape[:2]
+    fig, ax = plt.subplots(figsize=(6.0, 6.0 * height / width + 0.5))
+    ax.imshow(to_display(image, exposure_scale(image, percentile), curve), interpolation="nearest")
+    ax.set_title(title, fontsize=10)
+    ax.axis("off")
+    return _save(fig, path)
+
+
+def arrival_map(first_arrival_opl: np.ndarray, path: Path, title: str) -> list[Path]:
+    """Per-pixel OPL of the earliest direct light (NaN where the camera sees no lit surface), in ps."""
+    fig, ax = plt.subplots(figsize=(6.5, 6.5 * first_arrival_opl.shape[0] / first_arrival_opl.shape[1] + 0.5))
+    shown = ax.imshow(first_arrival_opl * PS_PER_M_OPL, cmap="viridis", interpolation="nearest")
+    fig.colorbar(shown, ax=ax, label="first direct arrival (ps)", shrink=0.8)
+    ax.set_title(title, fontsize=10)
+    ax.axis("off")
+    return _save(fig, path)

@@ -32,6 +32,7 @@ import numpy as np
 from pipeline.atomic import save_npy_atomic, write_json_atomic
 from pipeline.schema.scene import ReferenceConfig
 from render.exr import write_exr
+from render.figures import rendered_image
 from render.ply import read_ply
 from render.scene import Scene, bounding_sphere_of_points
 
@@ -373,6 +374,9 @@ def run_reference_stage(scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *,
     if cfg.steady:
         image, timing["steady"] = render_steady(scene, scene_dir, spp=cfg.spp, seed=seed, variant=cfg.variant, **common)
         write_exr(out_dir / "steady.exr", image)
+        steady_timing = timing["steady"]
+        rendered_image(image, out_dir / "steady.png",
+                       f"Mitsuba 3 volpath, {steady_timing['spp']} spp, {steady_timing['seconds']:.0f} s")
         save_npy_atomic(out_dir / "steady.npy", image)
     if transient:
         frames, steady, timing["transient"] = render_transient(

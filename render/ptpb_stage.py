@@ -15,6 +15,7 @@ import numpy as np
 from pipeline.atomic import atomic_path, save_npy_atomic, write_json_atomic
 from pipeline.schema.ptpb import PTPBConfig
 from render.exr import write_exr
+from render.figures import rendered_image
 from render.ply import read_ply
 from render.ptpb import render
 
@@ -53,6 +54,8 @@ def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: i
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_exr(out_dir / "steady.exr", result.steady)
+    rendered_image(result.steady, out_dir / "steady.png", f"ours (PTPB), {result.stats['iterations']} iterations, "
+                   f"{result.stats['time_total_s']:.0f} s")
     if result.snapshots:
         with atomic_path(out_dir / "snapshots.npz") as tmp:
             with open(tmp, "wb") as handle:

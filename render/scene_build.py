@@ -209,27 +209,26 @@ def _lights(cfg: SceneConfig, site: dict | None, centre: np.ndarray, radius: flo
 
 
 def direct_arrivals(camera: Camera, lights: list[dict], meshes: list[tuple[np.ndarray, np.ndarray]],
-                    emitter_centres: list[np.ndarray], max_rays: int = 4096) -> np.ndarray:
-    """OPL of single-scattered light at the surfaces the camera sees: light -> surface point -> pinhole,
-    for every light with a time origin (sun, point, spot, area). Empty when the camera sees nothing."""
+                    emitter_centres: list[np.ndarray], max_rays: int = 16384) -> np.ndarray:
+    """OPL of single-scattered light at the surfaces the camera sees, light -> surface point -> pinhole,
+    on a grid over the film (its edges included: jittered rays reach the pixel corners).
+
+    Returns (lights with a time origin, rows, columns), NaN where the camera sees no surface; the sun,
+    point and spot lights come first in scene order, then the emitting shapes."""
     from render.raytrace import RayEngine
 
     engine = RayEngine()
     for i, (v, f) in enumerate(meshes):
         engine.add_mesh(np.asarray(v, np.float32), np.asarray(f, np.uint32), i)
     engine.commit()
-    # A grid over the whole film, its edges included: jittered rays reach the pixel corners.
     step = max(1.0, math.sqrt(camera.width * camera.height / max_rays))
     px, py = np.meshgrid(np.linspace(0, camera.width, int(camera.width / step) + 1),
                          np.linspace(0, camera.height, int(camera.height / step) + 1))
     directions = camera_ray_direction(camera, px.ravel(), py.ravel()).reshape(-1, 3)
     origins = np.broadcast_to(np.asarray(camera.origin), directions.shape)
     hits = engine.intersect(origins, directions)
-    hit = hits.hit
-    if not np.any(hit):
-        return np.zeros(0)
-    points = origins[hit] + hits.t[hit, None] * directions[hit]
-    camera_leg = hits.t[hit].astype(np.float64)
+    camera_leg = np.where(hits.hit, hits.t, np.nan).astype(np.float64)
+    points = origins + np.nan_to_num(camera_leg)[:, None] * directions
     taus = []
     for light in lights:
         if light["type"] == "sun":
@@ -239,7 +238,7 @@ def direct_arrivals(camera: Camera, lights: list[dict], meshes: list[tuple[np.nd
             taus.append(np.linalg.norm(points - np.asarray(light["position"]), axis=1) + camera_leg)
     for c in emitter_centres:
         taus.append(np.linalg.norm(points - c, axis=1) + camera_leg)
-    return np.concatenate(taus) if taus else np.zeros(0)
+    return np.stack(taus).reshape(len(taus), *px.shape) if taus else np.zeros((0, *px.shape))
 
 
 def fit_window(film: FilmConfig, arrivals: np.ndarray) -> Film:
@@ -247,10 +246,10 @@ def fit_window(film: FilmConfig, arrivals: np.ndarray) -> Film:
     if film.window == "manual" or film.mode == "steady":
         start, width = film.start_opl, film.bin_width_opl
     else:
-        if arrivals.size == 0:
+        if not np.any(np.isfinite(arrivals)):
             raise ValueError("scene.film.window is auto, but the camera sees no lit surface; aim the camera "
                              "(scene.camera) or set scene.film.window: manual with start_opl and bin_width_opl")
-        earliest, latest = float(arrivals.min()), float(arrivals.max()) + film.window_tail_opl
+        earliest, latest = float(np.nanmin(arrivals)), float(np.nanmax(arrivals)) + film.window_tail_opl
         start = earliest - 0.02 * (latest - earliest)
         width = (latest - start) / film.temporal_bins
     return Film(mode=film.mode, temporal_bins=film.temporal_bins if film.mode == "transient" else 1,
@@ -308,6 +307,12 @@ def build_scene(cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = 
     arrivals = direct_arrivals(camera, lights, [m[1] for m in meshes],
                                [np.asarray(m[1][0], np.float64).mean(0) for m in light_meshes])
     film = fit_window(cfg.film, arrivals)
+    if arrivals.shape[0] and np.any(np.isfinite(arrivals)):
+        from render.figures import arrival_map
+
+        first = np.nanmin(np.where(np.isfinite(arrivals), arrivals, np.inf), axis=0)
+        arrival_map(np.where(np.isfinite(first), first, np.nan), out_dir / "first_arrival.png",
+                    "earliest direct light, light -> surface -> camera")
     (out_dir / "meshes").mkdir(parents=True, exist_ok=True)
     for name, (v, f) in meshes + light_meshes:
         write_ply(out_dir / "meshes" / f"{name}.ply", v, f, comment=f"{name}: metres, x east, y north, z up")
