@@ -137,6 +137,11 @@ def _medium_dict(medium) -> dict[str, Any]:
             "albedo": _rgb(np.clip(albedo, 0.0, 1.0)), "phase": {"type": "hg", "g": float(medium.g)}}
 
 
+# Mitsuba starts camera rays near_clip / cos(theta) in front of the pinhole (default 1 cm), and
+# mitransient's OPL counts from there: frames would arrive ~1 cm early. 0.1 mm keeps that below 1e-4 m.
+NEAR_CLIP = 1e-4
+
+
 def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int, seed: int = 0) -> dict:
     """The ``mi.load_dict`` dictionary of ``scene`` (meshes resolved against ``scene_dir``).
 
@@ -176,6 +181,7 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
             reach = np.linalg.norm(np.asarray(cam.origin) - centre) + disk_sun(light, centre, radius)["distance"]
             far = max(far, 2.0 * reach)
     sensor = {"type": "perspective", "fov": float(cam.fov), "fov_axis": cam.fov_axis, "far_clip": float(far),
+              "near_clip": NEAR_CLIP,
               "to_world": T().look_at(origin=list(cam.origin), target=list(cam.target), up=list(cam.up)),
               "film": film_dict, "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)}}
     if cam.medium:
