@@ -596,6 +596,15 @@ def _page(title: str, style: str, body: str) -> str:
             f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n")
 
 
+def _sigma_label(key: str, entry: dict) -> str:
+    """One poster line per medium: its rendered sigma_s and sigma_a (R, G, B) in 1/m."""
+    medium = entry.get("medium", {})
+    if "sigma_s" not in medium:
+        return ""
+    triple = lambda values: "/".join(f"{v:.3g}" for v in values)  # noqa: E731
+    return f"\n{key} σs {triple(medium['sigma_s'])} /m\nσa {triple(medium['sigma_a'])} /m"
+
+
 def write_poster(points: list[tuple[str, Any, str]], path: Path, title: str) -> None:
     """The poster grid of our steady renders; points whose image shape differs from the first are left out."""
     from render.figures import poster_grid
@@ -729,6 +738,7 @@ def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
         extras[name], files[name] = extra, point_files
         label = name + "".join(f"\n{key.split('.')[-1]}={value}" for key, value
                                in _overrides_for_people(spec["points"][name]["overrides"]) if value != name)
+        label += "".join(_sigma_label(key, medium) for key, medium in point_files.read_json("scene", "optics.json").items())
         images.append((name, point_files.read_array("render", "steady.npy"), label))
     title = f"Sweep '{spec['sweep']}'"
     paths = write_table(rows, folder, title)
