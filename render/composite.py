@@ -118,7 +118,7 @@ def side_by_side(
         diff = relative_difference(a_frames[k], b_frames[k], floor=0.01 * float(np.mean(b_frames)) + 1e-12)
         heat = (colormap(np.clip(diff / cfg.difference_vmax, 0, 1))[..., :3] * 255).astype(np.uint8)
         row = np.concatenate([upscale(p, cfg.video_min_height // 2) for p in (a, b, heat)], axis=1)
-        panels.append(annotate(row, [f"{labels[0]} | {labels[1]} | rel. diff 0–{cfg.difference_vmax:g}",
+        panels.append(annotate(row, [f"{labels[0]} | {labels[1]} | rel. diff 0 to {cfg.difference_vmax:g}",
                                      format_time(film.centre(k), cfg.time_unit)]))
     paths = {"side_by_side_video": write_mp4(out_dir / f"{stem}.mp4", np.stack(panels), _frame_rate(cfg, film))}
     still = out_dir / f"{stem}.png"

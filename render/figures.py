@@ -112,9 +112,12 @@ def error_curves(
         axes[1].loglog(iterations, errors, "o-", label=name)
     axes[0].set_xlabel("wall time (s)")
     axes[1].set_xlabel("iterations / samples per pixel")
+    from matplotlib.ticker import NullFormatter
+
     for ax in axes:
         ax.set_ylabel(metric)
         ax.grid(True, which="both", alpha=0.3)
+        ax.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap on short ranges
         ax.legend()
     fig.suptitle(f"{metric} against the reference")
     return _save(fig, path, pdf=True)
