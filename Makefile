@@ -49,6 +49,23 @@ test-cpp: $(STAMPS)/venv
 	ctest --test-dir build/ctest --output-on-failure
 	@rm -f build-ctest.log
 
+# ASan + UBSan build of the core in build/sanitize: the C++ tests (which render small scenes, with
+# checkpoints and resume) run as they are; the Python bindings' tests load the sanitized _core with
+# the ASan runtime and libstdc++ preloaded (Python is not instrumented), leak checks off for CPython.
+SANITIZE_TESTS := tests/ptpb/test_ptpb_hostile.py tests/ptpb/test_ptpb_checkpoint.py tests/ptpb/test_ptpb_stage.py \
+	tests/core/test_raytrace.py
+
+sanitize: $(STAMPS)/venv ## Build the core with -fsanitize=address,undefined; run ctest and the bindings' tests under it
+	cmake -S render/core -B build/sanitize -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPTPB_SANITIZE=ON \
+	  -DPTPB_BUILD_TESTS=ON -DPTPB_BUILD_PYTHON=ON -DPython_EXECUTABLE=$(abspath $(PY)) \
+	  -Dpybind11_DIR=$$($(PY) -m pybind11 --cmakedir) > build-sanitize.log 2>&1 || (cat build-sanitize.log; exit 1)
+	cmake --build build/sanitize
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir build/sanitize --output-on-failure
+	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" \
+	  ASAN_OPTIONS=detect_leaks=0 UBSAN_OPTIONS=print_stacktrace=1 \
+	  $(PY) render/core/tests/sanitized_bindings.py build/sanitize $(SANITIZE_TESTS)
+	@rm -f build-sanitize.log
+
 bench: setup ## Benchmarks: ray engine throughput, geometry stage against grid size
 	$(PY) benchmarks/bench_rays.py
 	@if [ -f benchmarks/bench_geometry.py ]; then $(PY) benchmarks/bench_geometry.py; fi

@@ -5,6 +5,11 @@ Each stage writes into a private staging folder ``runs/<name>/.<stage>.staging-<
 when the stage function has returned and its manifest is written is the folder renamed to
 ``runs/<name>/<stage>``. A stage killed at any moment therefore leaves either its previous
 complete output or nothing, and the next run redoes exactly the unfinished stages.
+
+A stage that can resume (the render stage) keeps its progress in ``runs/<name>/.<stage>.checkpoint/``,
+outside the staging swap. The runner owns that folder's life: it is removed before a stage runs
+without ``resume`` (a stale checkpoint never leaks into a fresh run) and once the stage's output
+is published.
 """
 from __future__ import annotations
 
@@ -42,6 +47,7 @@ class StageContext:
     quiet: bool = False
     resume: bool = False
     previous_dir: Path | None = None  # the last complete output of this stage, if any (for resume)
+    checkpoint_dir: Path | None = None  # survives the staging swap; holds what a resumed run continues from
 
 
 @dataclass(frozen=True)
@@ -71,6 +77,11 @@ class StageError(RuntimeError):
 
 def run_dir(config) -> Path:
     return Path(config.runs_dir) / config.name
+
+
+def checkpoint_dir(base: Path, stage: str) -> Path:
+    """Where ``stage`` of the run folder ``base`` keeps its checkpoints."""
+    return base / f".{stage}.checkpoint"
 
 
 def _remove_leftovers(base: Path, stage: str) -> None:
@@ -131,6 +142,8 @@ def run_stages(
             results.append(StageResult(stage.name, "disabled", final))
             continue
         missing = [u for u in stage.upstream if u in by_name and by_name[u].enabled(config) and u not in digests]
+        if missing and not selected:
+            continue  # neither run nor up to date; only a selected stage needs its upstream finished
         if missing:
             raise StageError(
                 f"stage '{stage.name}' needs the output of {', '.join(missing)}, which is not finished; "
@@ -142,12 +155,18 @@ def run_stages(
             if up_to_date and manifest is not None:
                 digests[stage.name] = manifest["outputs_digest"]
             continue
+        progress_dir = checkpoint_dir(base, stage.name)
         if up_to_date and not force and manifest is not None:
             log.info("stage %s is up to date (%s)", stage.name, final)
             digests[stage.name] = manifest["outputs_digest"]
+            # What killed runs left: their staging folders, and a checkpoint of a run killed after publishing.
+            _remove_leftovers(base, stage.name)
+            shutil.rmtree(progress_dir, ignore_errors=True)
             results.append(StageResult(stage.name, "skipped", final, summary=manifest.get("summary")))
             continue
         _remove_leftovers(base, stage.name)
+        if not resume:
+            shutil.rmtree(progress_dir, ignore_errors=True)
         staging = base / f".{stage.name}.staging-{os.getpid()}"
         staging.mkdir(parents=True)
         log.info("stage %s: running", stage.name)
@@ -160,6 +179,7 @@ def run_stages(
             quiet=quiet,
             resume=resume,
             previous_dir=final if final.exists() else None,
+            checkpoint_dir=progress_dir,
         )
         try:
             summary = stage.func(context) or {}
@@ -184,6 +204,7 @@ def run_stages(
         }
         write_json_atomic(staging / MANIFEST_NAME, record)
         _publish(staging, final)
+        shutil.rmtree(progress_dir, ignore_errors=True)  # the published output supersedes it
         digests[stage.name] = record["outputs_digest"]
         log.info("stage %s: done in %.1f s -> %s", stage.name, seconds, final)
         results.append(StageResult(stage.name, "ran", final, seconds, summary))

@@ -27,7 +27,7 @@ import numpy as np
 
 from pipeline.schema.ptpb import BeamRadius, PTPBConfig, TimeHalfWidth
 
-__all__ = ["RenderResult", "render", "resolve_settings", "scene_bounding_sphere"]
+__all__ = ["RenderResult", "core_inputs", "memory_bytes", "render", "resolve_settings", "scene_bounding_sphere"]
 
 
 @dataclass
@@ -136,22 +136,16 @@ def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
         "transmittance_cutoff": cfg.transmittance_cutoff,
         "camera_unwarp": cfg.camera_unwarp,
         "snapshot_every": cfg.snapshot_every,
+        "checkpoint_every_iterations": cfg.checkpoint_every_iterations,
+        "checkpoint_every_s": cfg.checkpoint_every_s or 0.0,
+        "memory_budget_gib": cfg.memory_budget_gib,
     }
 
 
-def render(
-    scene: dict,
-    settings: PTPBConfig | dict,
-    *,
-    progress: bool | Callable[[dict], Optional[bool]] = False,
-    **overrides: Any,
-) -> RenderResult:
-    """Render ``scene`` (the core dict above) with ``settings`` (a PTPBConfig, or a core settings
-    dict with R_0/T_0 already in metres). ``overrides`` replace core settings keys (e.g. jitter).
-    ``progress=True`` shows a tqdm bar; a callable receives the core's progress dicts.
-    Ctrl-C stops after the last complete iteration; ``stats["interrupted"]`` tells."""
-    from render import _core
-
+def core_inputs(scene: dict, settings: PTPBConfig | dict, **overrides: Any) -> tuple[dict, dict]:
+    """The scene and settings dicts the core renders: a PTPBConfig resolved to metres (its
+    frame_mode, when set, replacing the film's), a core settings dict as it is; ``overrides``
+    replace core settings keys."""
     scene = dict(scene)
     if isinstance(settings, PTPBConfig):
         core_settings = resolve_settings(scene, settings)
@@ -160,6 +154,39 @@ def render(
     else:
         core_settings = dict(settings)
     core_settings.update(overrides)
+    return scene, core_settings
+
+
+def memory_bytes(scene: dict, settings: PTPBConfig | dict, *, state_copy: bool = False) -> float:
+    """Peak bytes of the render's image buffers, the figure render.memory_budget_gib is checked against
+    (``state_copy``: with checkpoints or a resume state)."""
+    from render import _core
+
+    return _core.ptpb_memory_bytes(*core_inputs(scene, settings), state_copy)
+
+
+def render(
+    scene: dict,
+    settings: PTPBConfig | dict,
+    *,
+    progress: bool | Callable[[dict], Optional[bool]] = False,
+    resume: Optional[dict] = None,
+    checkpoint: Optional[Callable[[dict], Optional[bool]]] = None,
+    **overrides: Any,
+) -> RenderResult:
+    """Render ``scene`` (the core dict above) with ``settings`` (a PTPBConfig, or a core settings
+    dict with R_0/T_0 already in metres). ``overrides`` replace core settings keys (e.g. jitter).
+    ``progress=True`` shows a tqdm bar; a callable receives the core's progress dicts.
+    Ctrl-C stops after the last complete iteration; ``stats["interrupted"]`` tells.
+
+    ``checkpoint(state)`` receives the accumulated state (``width``, ``height``, ``frame_count``,
+    ``seed``, float64 sums ``steady``/``early``/``late`` (H, W, 3) and ``frames`` (F, H, W, 3), the
+    ``stats`` counters, ``snapshot_iterations``/``snapshot_seconds``/``snapshots``) every
+    ``checkpoint_every_iterations`` iterations or ``checkpoint_every_s`` seconds and once more when
+    the run is cancelled; ``resume=state`` continues from one, bit-identically (ptpb.md §9)."""
+    from render import _core
+
+    scene, core_settings = core_inputs(scene, settings, **overrides)
     bar = None
     callback = progress if callable(progress) else None
     if progress is True:
@@ -176,7 +203,7 @@ def render(
             return True
 
     try:
-        out = _core.ptpb_render(scene, core_settings, callback)
+        out = _core.ptpb_render(scene, core_settings, callback, resume, checkpoint)
     finally:
         if bar is not None:
             bar.close()

@@ -4,21 +4,32 @@ Outputs in ``out_dir``: ``steady.exr`` and ``steady.npy`` (H, W, 3), ``frames.np
 float32, ``snapshots.npz`` (the steady average every ``snapshot_every`` iterations, with their
 iteration counts and wall times, for error-against-time curves) and ``stats.json`` (run
 statistics, resolved R_0/T_0, film and time conventions).
+
+With ``render.checkpoint_every_iterations`` or ``checkpoint_every_s`` set, the accumulated render
+is saved to ``checkpoint_dir/checkpoint.npz`` as it goes (render/ptpb_checkpoint.py). A checkpoint
+found there is continued: the stage runner leaves one only under ``pipeline run --resume``, and a
+checkpoint of another scene or other settings is refused. An interrupted render (Ctrl-C) saves
+its completed iterations and raises KeyboardInterrupt, so a partial render is never published.
 """
 from __future__ import annotations
 
 import json
+import logging
 import resource
 from pathlib import Path
 
 import numpy as np
 
 from pipeline.atomic import atomic_path, save_npy_atomic, write_json_atomic
+from pipeline.runner import checkpoint_dir as stage_checkpoint_dir
 from pipeline.schema.ptpb import PTPBConfig
 from render.exr import write_exr
 from render.figures import rendered_image
 from render.ply import read_ply
-from render.ptpb import render
+from render.ptpb import core_inputs, render
+from render.ptpb_checkpoint import CHECKPOINT_NAME, load_checkpoint, render_fingerprint, save_checkpoint
+
+log = logging.getLogger(__name__)
 
 
 def _load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -47,12 +58,37 @@ def load_core_scene(scene_dir: Path) -> dict:
 
 
 def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: int, threads: int,
-                     quiet: bool = False) -> dict:
-    """Render the scene in ``scene_dir`` with ``cfg`` (seed and threads override the config's)."""
+                     quiet: bool = False, checkpoint_dir: Path | None = None) -> dict:
+    """Render the scene in ``scene_dir`` with ``cfg`` (seed and threads override the config's).
+
+    ``checkpoint_dir`` defaults to the stage runner's ``.render.checkpoint`` next to ``out_dir``."""
+    out_dir = Path(out_dir)
     scene = load_core_scene(Path(scene_dir))
     cfg = cfg.model_copy(update={"seed": seed, "threads": threads})
-    result = render(scene, cfg, progress=not quiet)
-    out_dir = Path(out_dir)
+    path = Path(checkpoint_dir or stage_checkpoint_dir(out_dir.parent, "render")) / CHECKPOINT_NAME
+    fingerprint = render_fingerprint(*core_inputs(scene, cfg))
+    resume = None
+    if path.exists():
+        try:
+            resume = load_checkpoint(path, fingerprint)
+        except ValueError as exc:
+            raise ValueError(f"render: {exc}; run without --resume to start over (that removes the checkpoint)") from None
+        log.info("render: resuming from %s after %d iterations", path, resume["stats"]["iterations"])
+
+    def save(state: dict) -> None:
+        save_checkpoint(path, state, fingerprint)
+        log.info("render: checkpoint after %d iterations -> %s", state["stats"]["iterations"], path)
+
+    result = render(scene, cfg, progress=not quiet, resume=resume, checkpoint=save)
+    if result.stats["interrupted"]:
+        done = result.stats["iterations"]
+        if cfg.checkpoint_every_iterations or cfg.checkpoint_every_s:
+            log.warning("render interrupted after %d iterations, which %s keeps; continue with `pipeline run --resume`",
+                        done, path)
+        else:
+            log.warning("render interrupted after %d iterations; set render.checkpoint_every_iterations to be able to "
+                        "resume interrupted renders", done)
+        raise KeyboardInterrupt
     out_dir.mkdir(parents=True, exist_ok=True)
     write_exr(out_dir / "steady.exr", result.steady)
     rendered_image(result.steady, out_dir / "steady.png", f"ours (PTPB), {result.stats['iterations']} iterations, "

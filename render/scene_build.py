@@ -114,15 +114,23 @@ def _object_mesh(obj: ObjectConfig, penitentes: tuple[np.ndarray, np.ndarray] | 
     path = Path(obj.path or "")
     if not path.is_file():
         raise ValueError(f"{where}: mesh file {path} does not exist (scene.objects[].path)")
-    return read_ply(path)
+    try:
+        return read_ply(path)
+    except (ValueError, KeyError, IndexError) as exc:  # a truncated or foreign PLY
+        raise ValueError(f"{where}: cannot read mesh file {path}: {exc}") from None
 
 
 def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """Refuse meshes a renderer cannot treat as a closed boundary: empty, NaN, or not watertight."""
+    """Refuse meshes a renderer cannot treat as a closed boundary: empty, NaN, indices out of range,
+    not watertight (non-manifold), or inside out. Zero-area triangles that repeat a vertex leave the
+    surface closed and are kept: no ray can hit them."""
     if len(vertices) == 0 or len(faces) == 0:
         raise ValueError(f"object '{name}': the mesh is empty")
     if not np.all(np.isfinite(vertices)):
         raise ValueError(f"object '{name}': the mesh has NaN or infinite vertices")
+    if int(np.max(faces)) >= len(vertices):
+        raise ValueError(f"object '{name}': face {int(np.argmax(np.max(faces, axis=1)))} refers to vertex "
+                         f"{int(np.max(faces))}, but the mesh has {len(vertices)} vertices")
     import manifold3d
 
     solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(vertices, np.float32),

@@ -94,6 +94,24 @@ class PTPBConfig(StrictModel):
     frame_mode: Optional[Literal["steady", "bins", "gate"]] = Field(
         None, description="Overrides the film's frame_mode when set [-]."
     )
+    checkpoint_every_iterations: int = Field(
+        0, ge=0,
+        description="Save the accumulated render (double sums, counters, snapshots) to runs/<name>/.render.checkpoint/ "
+        "every k iterations, so that `pipeline run --resume` continues an interrupted render with the same bits "
+        "(0: never) [-].",
+    )
+    checkpoint_every_s: Optional[float] = Field(
+        None, gt=0, description="Also save a checkpoint when this much wall time has passed since the last one (null: "
+        "never) [s].",
+    )
+    memory_budget_gib: Optional[float] = Field(
+        8.0, gt=0,
+        description="Refuse, before allocating, a render whose image buffers exceed this. They take 20 bytes per value "
+        "of (3 + temporal_bins) x height x width x 3 (double sums and per-iteration buffers, float32 results; 8 more "
+        "with checkpoints or a resume) plus 12 bytes per pixel for each kept snapshot. The film is refused, not "
+        "rendered in chunks of frames: every ray-beam pair splats into all the frames its kernel covers in one pass, "
+        "and chunks would trace every light path once per chunk. 8 suits a 24 GiB machine; null: no limit [GiB].",
+    )
 
     @model_validator(mode="after")
     def _budget(self) -> "PTPBConfig":

@@ -4,7 +4,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -59,9 +61,30 @@ E choose(const std::string& value, std::initializer_list<std::pair<const char*, 
 
 std::vector<py::dict> dict_list(const py::dict& d, const char* key) {
   std::vector<py::dict> out;
-  if (!d.contains(key)) return out;
-  for (const auto& item : d[key].cast<py::list>()) out.push_back(item.cast<py::dict>());
+  if (!d.contains(key) || d[key].is_none()) return out;
+  const py::object items = d[key];
+  if (!py::isinstance<py::list>(items) && !py::isinstance<py::tuple>(items))
+    throw std::invalid_argument(std::string("scene.") + key + " must be a list of dicts");
+  int i = 0;
+  for (const auto& item : items) {
+    if (!py::isinstance<py::dict>(item))
+      throw std::invalid_argument(std::string("scene.") + key + "[" + std::to_string(i) + "] must be a dict");
+    out.push_back(item.cast<py::dict>());
+    ++i;
+  }
   return out;
+}
+
+// An (N, 3) array of a shape's mesh; a missing key, another shape or a non-numeric value names the key.
+template <typename T>
+py::array_t<T, py::array::c_style | py::array::forcecast> mesh_array(const py::dict& s, const char* key,
+                                                                      const std::string& where) {
+  if (!s.contains(key)) throw std::invalid_argument(where + "." + key + " is required");
+  const auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(s[key]);  // null if not numeric
+  if (!a) throw std::invalid_argument(where + "." + key + " must be an array of numbers");
+  if (a.ndim() != 2 || a.shape(1) != 3)
+    throw std::invalid_argument(where + "." + key + (a.ndim() == 1 && a.shape(0) == 0 ? " is empty" : " must be (N, 3)"));
+  return a;
 }
 
 Scene parse_scene(const py::dict& d) {
@@ -80,12 +103,18 @@ Scene parse_scene(const py::dict& d) {
   for (const py::dict& s : dict_list(d, "shapes")) {
     const std::string w = "shapes[" + std::to_string(i++) + "]";
     Shape sh;
-    auto verts = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(s["vertices"]);
-    auto faces = py::array_t<std::uint32_t, py::array::c_style | py::array::forcecast>::ensure(s["faces"]);
-    if (!verts || verts.ndim() != 2 || verts.shape(1) != 3) throw std::invalid_argument(w + ".vertices must be (N, 3)");
-    if (!faces || faces.ndim() != 2 || faces.shape(1) != 3) throw std::invalid_argument(w + ".faces must be (M, 3)");
+    const auto verts = mesh_array<float>(s, "vertices", w);
+    // Faces go through int64 first: a negative index must be refused, not wrapped to a huge one.
+    const auto faces = mesh_array<std::int64_t>(s, "faces", w);
     sh.vertices.assign(verts.data(), verts.data() + verts.size());
-    sh.faces.assign(faces.data(), faces.data() + faces.size());
+    sh.faces.resize(std::size_t(faces.size()));
+    for (py::ssize_t k = 0; k < faces.size(); ++k) {
+      const std::int64_t index = faces.data()[k];
+      if (index < 0 || index > 0xFFFFFFFELL)
+        throw std::invalid_argument(w + ".faces[" + std::to_string(k / 3) + "] has vertex index " +
+                                    std::to_string(index) + ", outside [0, 2^32 - 1)");
+      sh.faces[std::size_t(k)] = static_cast<std::uint32_t>(index);
+    }
     sh.kind = choose<SurfaceKind>(get<std::string>(s, "kind", "null", w),
                                   {{"null", SurfaceKind::Null}, {"dielectric", SurfaceKind::Dielectric},
                                    {"diffuse", SurfaceKind::Diffuse}}, w + ".kind");
@@ -174,77 +203,18 @@ RenderSettings parse_settings(const py::dict& d) {
   s.transmittance_cutoff = get<double>(d, "transmittance_cutoff", s.transmittance_cutoff, w);
   s.tile_size = get<int>(d, "tile_size", s.tile_size, w);
   s.snapshot_every = get<int>(d, "snapshot_every", 0, w);
+  s.checkpoint_every_iterations = get<int>(d, "checkpoint_every_iterations", 0, w);
+  s.checkpoint_every_s = get<double>(d, "checkpoint_every_s", 0.0, w);
+  // None: no limit (the config's null).
+  if (d.contains("memory_budget_gib"))
+    s.memory_budget_gib = d["memory_budget_gib"].is_none() ? 0.0 : get<double>(d, "memory_budget_gib", 0.0, w);
   return s;
 }
 
-// NumPy array that takes ownership of a vector's buffer (no copy).
-py::array_t<float> owned_array(std::vector<float>&& v, std::vector<py::ssize_t> shape) {
-  auto* holder = new std::vector<float>(std::move(v));
-  py::capsule free_when_done(holder, [](void* p) { delete static_cast<std::vector<float>*>(p); });
-  return py::array_t<float>(shape, holder->data(), free_when_done);
-}
-
-py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, const py::object& progress) {
-  const Scene scene = parse_scene(scene_dict);
-  const RenderSettings settings = parse_settings(settings_dict);
-  bool interrupted = false;
-  std::unique_ptr<py::error_already_set> callback_error;
-  ProgressCallback cb = [&](const Progress& p) {
-    py::gil_scoped_acquire gil;
-    if (PyErr_CheckSignals() != 0) {
-      // Ctrl-C: stop after the last complete iteration and return what we have.
-      if (PyErr_ExceptionMatches(PyExc_KeyboardInterrupt)) {
-        PyErr_Clear();
-        interrupted = true;
-      } else {
-        callback_error = std::make_unique<py::error_already_set>();
-      }
-      return false;
-    }
-    if (progress.is_none()) return true;
-    try {
-      py::dict info;
-      info["iteration"] = p.iteration;
-      info["iterations"] = p.iterations;
-      info["elapsed_s"] = p.elapsed_s;
-      info["radius"] = p.radius;
-      info["time_half_width"] = p.time_half_width;
-      info["beams"] = p.beams;
-      info["surface_radius"] = p.surface_radius;
-      info["surface_photons"] = p.surface_photons;
-      py::object keep_going = progress(info);
-      return keep_going.is_none() || keep_going.cast<bool>();
-    } catch (py::error_already_set& e) {
-      if (e.matches(PyExc_KeyboardInterrupt)) {
-        interrupted = true;
-      } else {
-        callback_error = std::make_unique<py::error_already_set>(std::move(e));
-      }
-      return false;
-    }
-  };
-  RenderResult r;
-  {
-    py::gil_scoped_release release;
-    r = render(scene, settings, cb);
-  }
-  if (callback_error) throw std::move(*callback_error);
-  const py::ssize_t H = r.height, W = r.width, F = r.frame_count;
-  py::dict out;
-  out["steady"] = owned_array(std::move(r.steady), {H, W, 3});
-  out["frames"] = owned_array(std::move(r.frames), {F, H, W, 3});
-  out["early"] = owned_array(std::move(r.early), {H, W, 3});
-  out["late"] = owned_array(std::move(r.late), {H, W, 3});
-  py::list snaps;
-  for (std::size_t i = 0; i < r.snapshots.size(); ++i)
-    snaps.append(py::make_tuple(r.snapshot_iterations[i], owned_array(std::move(r.snapshots[i]), {H, W, 3})));
-  out["snapshots"] = snaps;
-  out["snapshot_seconds"] = py::cast(r.snapshot_seconds);
-  const RenderStats& s = r.stats;
+// RenderStats under the names of the result's "stats" dict; a resume state carries the same dict.
+py::dict stats_dict(const RenderStats& s) {
   py::dict st;
   st["iterations"] = s.iterations_done;
-  st["cancelled"] = s.cancelled;
-  st["interrupted"] = interrupted;
   st["light_paths"] = s.light_paths;
   st["beams"] = s.beams;
   st["queries"] = s.queries;
@@ -265,6 +235,189 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
   st["time_surface_build_s"] = s.time_surface_build_s;
   st["final_surface_radius"] = s.final_surface_radius;
   st["final_surface_time_half_width"] = s.final_surface_time_half_width;
+  return st;
+}
+
+RenderStats parse_stats(const py::dict& d) {
+  const std::string w = "resume.stats";
+  RenderStats s;
+  s.iterations_done = require_key<int>(d, "iterations", w);
+  s.light_paths = require_key<std::uint64_t>(d, "light_paths", w);
+  s.beams = require_key<std::uint64_t>(d, "beams", w);
+  s.queries = require_key<std::uint64_t>(d, "queries", w);
+  s.candidates = require_key<std::uint64_t>(d, "candidates", w);
+  s.pair_evaluations = require_key<std::uint64_t>(d, "pair_evaluations", w);
+  s.parallel_rejected = require_key<std::uint64_t>(d, "parallel_rejected", w);
+  s.false_positives = require_key<std::uint64_t>(d, "false_positives", w);
+  s.accel_references = require_key<std::uint64_t>(d, "accel_references", w);
+  s.time_light_s = require_key<double>(d, "time_light_s", w);
+  s.time_build_s = require_key<double>(d, "time_build_s", w);
+  s.time_camera_s = require_key<double>(d, "time_camera_s", w);
+  s.time_total_s = require_key<double>(d, "time_total_s", w);
+  s.final_radius = require_key<double>(d, "final_radius", w);
+  s.final_time_half_width = require_key<double>(d, "final_time_half_width", w);
+  s.surface_photons = require_key<std::uint64_t>(d, "surface_photons", w);
+  s.surface_queries = require_key<std::uint64_t>(d, "surface_queries", w);
+  s.surface_pairs = require_key<std::uint64_t>(d, "surface_pairs", w);
+  s.time_surface_build_s = require_key<double>(d, "time_surface_build_s", w);
+  s.final_surface_radius = require_key<double>(d, "final_surface_radius", w);
+  s.final_surface_time_half_width = require_key<double>(d, "final_surface_time_half_width", w);
+  return s;
+}
+
+template <typename T>
+py::array_t<T> copy_array(const T* data, std::vector<py::ssize_t> shape) {
+  py::array_t<T> a(shape);
+  std::copy(data, data + a.size(), a.mutable_data());
+  return a;
+}
+
+// The checkpoint dict: the state's sums copied out as float64 arrays (the callback may keep them).
+py::dict state_dict(const RenderState& st) {
+  const py::ssize_t H = st.height, W = st.width, F = st.frame_count, S = py::ssize_t(st.snapshots.size());
+  py::dict out;
+  out["width"] = st.width;
+  out["height"] = st.height;
+  out["frame_count"] = st.frame_count;
+  out["seed"] = st.seed;
+  out["steady"] = copy_array(st.steady.data(), {H, W, 3});
+  out["early"] = copy_array(st.early.data(), {H, W, 3});
+  out["late"] = copy_array(st.late.data(), {H, W, 3});
+  out["frames"] = copy_array(st.frames.data(), {F, H, W, 3});
+  out["stats"] = stats_dict(st.stats);
+  out["snapshot_iterations"] = py::cast(st.snapshot_iterations);
+  out["snapshot_seconds"] = py::cast(st.snapshot_seconds);
+  py::array_t<float> snaps({S, H, W, py::ssize_t(3)});
+  for (py::ssize_t k = 0; k < S; ++k)
+    std::copy(st.snapshots[k].begin(), st.snapshots[k].end(), snaps.mutable_data() + k * H * W * 3);
+  out["snapshots"] = snaps;
+  return out;
+}
+
+template <typename T>
+std::vector<T> state_array(const py::dict& d, const char* key, std::vector<py::ssize_t> shape) {
+  if (!d.contains(key)) throw std::invalid_argument(std::string("resume.") + key + " is required");
+  const auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(d[key]);
+  if (!a) throw std::invalid_argument(std::string("resume.") + key + " must be an array of numbers");
+  bool same = a.ndim() == py::ssize_t(shape.size());
+  for (std::size_t k = 0; same && k < shape.size(); ++k) same = a.shape(k) == shape[k];
+  if (!same) throw std::invalid_argument(std::string("resume.") + key + " does not have the shape of the state's film");
+  return std::vector<T>(a.data(), a.data() + a.size());
+}
+
+RenderState parse_state(const py::dict& d) {
+  const std::string w = "resume";
+  RenderState st;
+  st.width = require_key<int>(d, "width", w);
+  st.height = require_key<int>(d, "height", w);
+  st.frame_count = require_key<int>(d, "frame_count", w);
+  st.seed = require_key<std::uint64_t>(d, "seed", w);
+  if (st.width < 1 || st.height < 1 || st.frame_count < 0) throw std::invalid_argument("resume: film size out of range");
+  const py::ssize_t H = st.height, W = st.width, F = st.frame_count;
+  st.steady = state_array<double>(d, "steady", {H, W, 3});
+  st.early = state_array<double>(d, "early", {H, W, 3});
+  st.late = state_array<double>(d, "late", {H, W, 3});
+  st.frames = state_array<double>(d, "frames", {F, H, W, 3});
+  st.stats = parse_stats(require_key<py::dict>(d, "stats", w));
+  st.snapshot_iterations = get<std::vector<int>>(d, "snapshot_iterations", {}, w);
+  st.snapshot_seconds = get<std::vector<double>>(d, "snapshot_seconds", {}, w);
+  const py::ssize_t S = py::ssize_t(st.snapshot_iterations.size());
+  const std::vector<float> snaps = S > 0 ? state_array<float>(d, "snapshots", {S, H, W, 3}) : std::vector<float>{};
+  for (py::ssize_t k = 0; k < S; ++k)
+    st.snapshots.emplace_back(snaps.begin() + k * H * W * 3, snaps.begin() + (k + 1) * H * W * 3);
+  return st;
+}
+
+// NumPy array that takes ownership of a vector's buffer (no copy).
+py::array_t<float> owned_array(std::vector<float>&& v, std::vector<py::ssize_t> shape) {
+  auto* holder = new std::vector<float>(std::move(v));
+  py::capsule free_when_done(holder, [](void* p) { delete static_cast<std::vector<float>*>(p); });
+  return py::array_t<float>(shape, holder->data(), free_when_done);
+}
+
+py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, const py::object& progress,
+                   const py::object& resume, const py::object& checkpoint) {
+  const Scene scene = parse_scene(scene_dict);
+  const RenderSettings settings = parse_settings(settings_dict);
+  const bool checkpointing = !checkpoint.is_none() &&
+                             (settings.checkpoint_every_iterations > 0 || settings.checkpoint_every_s > 0);
+  // Before the resume state is copied in: a film over budget must not allocate anything.
+  check_memory_budget(scene, settings, !resume.is_none() || checkpointing);
+  std::optional<RenderState> initial;
+  if (!resume.is_none()) {
+    if (!py::isinstance<py::dict>(resume)) throw std::invalid_argument("resume must be a dict (a checkpoint's state)");
+    initial = parse_state(resume.cast<py::dict>());
+  }
+  bool interrupted = false;
+  std::unique_ptr<py::error_already_set> callback_error;
+  auto keep_error = [&](py::error_already_set& e) {
+    if (e.matches(PyExc_KeyboardInterrupt)) interrupted = true;
+    else if (!callback_error) callback_error = std::make_unique<py::error_already_set>(std::move(e));
+  };
+  ProgressCallback cb = [&](const Progress& p) {
+    py::gil_scoped_acquire gil;
+    if (PyErr_CheckSignals() != 0) {
+      // Ctrl-C: stop after the last complete iteration and return what we have.
+      if (PyErr_ExceptionMatches(PyExc_KeyboardInterrupt)) {
+        PyErr_Clear();
+        interrupted = true;
+      } else if (!callback_error) {
+        callback_error = std::make_unique<py::error_already_set>();
+      }
+      return false;
+    }
+    if (progress.is_none()) return true;
+    try {
+      py::dict info;
+      info["iteration"] = p.iteration;
+      info["iterations"] = p.iterations;
+      info["elapsed_s"] = p.elapsed_s;
+      info["radius"] = p.radius;
+      info["time_half_width"] = p.time_half_width;
+      info["beams"] = p.beams;
+      info["surface_radius"] = p.surface_radius;
+      info["surface_photons"] = p.surface_photons;
+      py::object keep_going = progress(info);
+      return keep_going.is_none() || keep_going.cast<bool>();
+    } catch (py::error_already_set& e) {
+      keep_error(e);
+      return false;
+    }
+  };
+  CheckpointCallback save;
+  if (checkpointing) {
+    save = [&](const RenderState& st) {
+      py::gil_scoped_acquire gil;
+      try {
+        py::object keep_going = checkpoint(state_dict(st));
+        return keep_going.is_none() || keep_going.cast<bool>();
+      } catch (py::error_already_set& e) {
+        keep_error(e);
+        return false;
+      }
+    };
+  }
+  RenderResult r;
+  {
+    py::gil_scoped_release release;
+    r = render(scene, settings, cb, std::move(initial), save);
+  }
+  if (callback_error) throw std::move(*callback_error);
+  const py::ssize_t H = r.height, W = r.width, F = r.frame_count;
+  py::dict out;
+  out["steady"] = owned_array(std::move(r.steady), {H, W, 3});
+  out["frames"] = owned_array(std::move(r.frames), {F, H, W, 3});
+  out["early"] = owned_array(std::move(r.early), {H, W, 3});
+  out["late"] = owned_array(std::move(r.late), {H, W, 3});
+  py::list snaps;
+  for (std::size_t i = 0; i < r.snapshots.size(); ++i)
+    snaps.append(py::make_tuple(r.snapshot_iterations[i], owned_array(std::move(r.snapshots[i]), {H, W, 3})));
+  out["snapshots"] = snaps;
+  out["snapshot_seconds"] = py::cast(r.snapshot_seconds);
+  const RenderStats& s = r.stats;
+  py::dict st = stats_dict(s);
+  st["cancelled"] = s.cancelled;
+  st["interrupted"] = interrupted;
   const double all = s.steady_total;
   st["out_of_window_fraction"] = all > 0 ? (s.early_total + s.late_total) / all : 0.0;
   st["early_fraction"] = all > 0 ? s.early_total / all : 0.0;
@@ -273,14 +426,23 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
   return out;
 }
 
+double memory_bytes_py(const py::dict& scene_dict, const py::dict& settings_dict, bool state_copy) {
+  return render_memory_bytes(parse_scene(scene_dict), parse_settings(settings_dict), state_copy);
+}
+
 }  // namespace
 
 void register_ptpb(py::module_& m) {
   m.def("ptpb_render", &render_py, py::arg("scene"), py::arg("settings"), py::arg("progress") = py::none(),
+        py::arg("resume") = py::none(), py::arg("checkpoint") = py::none(),
         "Render a scene dict with the PTPB renderer; returns a dict of arrays and statistics.\n"
         "The GIL is released while rendering; `progress(info) -> bool|None` is called about\n"
         "twice a second and after each iteration; returning False or Ctrl-C stops after the\n"
-        "last complete iteration.");
+        "last complete iteration. `checkpoint(state) -> bool|None` receives the accumulated state\n"
+        "(float64 sums, stats, snapshots) every settings.checkpoint_every_iterations iterations or\n"
+        "checkpoint_every_s seconds, and once more on cancellation; `resume=state` continues it.");
+  m.def("ptpb_memory_bytes", &memory_bytes_py, py::arg("scene"), py::arg("settings"), py::arg("state_copy") = false,
+        "Peak bytes of the render's image buffers, as checked against settings.memory_budget_gib.");
   m.def("ptpb_schedule_gamma", &schedule_gamma, py::arg("iteration"), py::arg("alpha"));
   m.attr("SPEED_OF_LIGHT") = kSpeedOfLight;
   m.attr("PS_PER_M_OPL") = kPicosecondsPerMetreOpl;

@@ -46,8 +46,15 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
   Vec3d lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
   for (const Shape& s : scene.shapes) {
     const std::string where = "shapes[" + std::to_string(mesh_id) + "]";
-    require(!s.vertices.empty() && s.vertices.size() % 3 == 0, where + ".vertices must be N x 3");
-    require(!s.faces.empty() && s.faces.size() % 3 == 0, where + ".faces must be M x 3");
+    require(!s.vertices.empty() && !s.faces.empty(), where + ": the mesh is empty (no vertices or no faces)");
+    require(s.vertices.size() % 3 == 0, where + ".vertices must be N x 3");
+    require(s.faces.size() % 3 == 0, where + ".faces must be M x 3");
+    for (std::size_t k = 0; k < s.vertices.size(); ++k)
+      require(std::isfinite(s.vertices[k]), where + ".vertices[" + std::to_string(k / 3) + "] is NaN or infinite");
+    for (std::size_t k = 0; k < s.faces.size(); ++k)
+      require(s.faces[k] < s.vertices.size() / 3, where + ".faces[" + std::to_string(k / 3) + "] refers to vertex " +
+                                                      std::to_string(s.faces[k]) + ", but the mesh has " +
+                                                      std::to_string(s.vertices.size() / 3) + " vertices");
     require_medium_id(s.interior, scene.media.size(), where + ".interior");
     require_medium_id(s.exterior, scene.media.size(), where + ".exterior");
     require(finite_nonneg(s.radiance), where + ".radiance must be finite and >= 0");

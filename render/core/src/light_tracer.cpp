@@ -115,7 +115,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
       }
     }
     if (depth >= st.rr_depth) {
-      const double q = std::min(1.0, max_component(beta) / beta0_max);
+      const double q = std::min(kMaxSurvival, max_component(beta) / beta0_max);
       if (!(rng.next_double() < q)) return;
       beta = beta / q;
     }

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -55,6 +56,71 @@ void validate(const RenderSettings& s) {
           "initial_surface_time_half_width must be > 0 (m of OPL)");
   require(!s.surface_alpha || (*s.surface_alpha > 0 && *s.surface_alpha <= 1), "surface_alpha must lie in (0, 1]");
   require(s.surface_normal_cos > 0 && s.surface_normal_cos <= 1, "surface_normal_cos must lie in (0, 1]");
+  require(s.checkpoint_every_iterations >= 0, "checkpoint_every_iterations must be >= 0");
+  require(std::isfinite(s.checkpoint_every_s) && s.checkpoint_every_s >= 0, "checkpoint_every_s must be >= 0 (s)");
+  require(std::isfinite(s.memory_budget_gib) && s.memory_budget_gib >= 0, "memory_budget_gib must be >= 0 (0: no limit)");
+}
+
+int film_frame_count(const Film& film) { return film.mode == FrameMode::Steady ? 0 : std::max(0, film.temporal_bins); }
+
+std::string gib_text(double bytes) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.2f GiB", bytes / double(1ull << 30));
+  return text;
+}
+
+RenderState fresh_state(int W, int H, int F, std::uint64_t seed) {
+  RenderState st;
+  st.width = W;
+  st.height = H;
+  st.frame_count = F;
+  st.seed = seed;
+  const std::size_t px3 = std::size_t(W) * H * 3;
+  st.steady.assign(px3, 0.0);
+  st.early.assign(px3, 0.0);
+  st.late.assign(px3, 0.0);
+  st.frames.assign(std::size_t(F) * px3, 0.0);
+  return st;
+}
+
+bool all_finite(const std::vector<double>& v) {
+  for (double x : v)
+    if (!std::isfinite(x)) return false;
+  return true;
+}
+
+// A resume state must belong to this film, seed and bandwidth schedule: the bandwidths of its last
+// iteration are recomputed and compared bit for bit, which catches changed R_0, T_0, alpha or mode.
+void validate_resume(const RenderState& st, const Scene& scene, const RenderSettings& s, int W, int H, int F) {
+  auto require = [](bool ok, const std::string& what) { if (!ok) throw std::invalid_argument("resume state: " + what); };
+  require(st.width == W && st.height == H && st.frame_count == F,
+          "it holds a " + std::to_string(st.width) + " x " + std::to_string(st.height) + " film with " +
+              std::to_string(st.frame_count) + " frames, the scene has " + std::to_string(W) + " x " +
+              std::to_string(H) + " with " + std::to_string(F));
+  const std::size_t px3 = std::size_t(W) * H * 3;
+  require(st.steady.size() == px3 && st.early.size() == px3 && st.late.size() == px3 &&
+              st.frames.size() == std::size_t(F) * px3,
+          "its sums do not have the film's size");
+  require(st.seed == s.seed, "it was rendered with seed " + std::to_string(st.seed) + ", the settings have seed " +
+                                 std::to_string(s.seed));
+  const int done = st.stats.iterations_done;
+  require(done >= 0, "iterations_done must be >= 0");
+  require(s.time_budget_s > 0 || done <= s.iterations,
+          "it already holds " + std::to_string(done) + " iterations, more than settings.iterations = " +
+              std::to_string(s.iterations));
+  require(st.snapshot_iterations.size() == st.snapshots.size() && st.snapshot_seconds.size() == st.snapshots.size(),
+          "its snapshot lists differ in length");
+  for (const auto& snap : st.snapshots) require(snap.size() == px3, "a snapshot does not have the film's size");
+  require(all_finite(st.steady) && all_finite(st.early) && all_finite(st.late) && all_finite(st.frames),
+          "its sums hold NaN or infinite values (a damaged checkpoint)");
+  if (done == 0) return;
+  double R, T, r_s, T_s;
+  iteration_bandwidths(scene.film.mode, s, done - 1, R, T);
+  surface_bandwidths(scene.film.mode, s, done - 1, r_s, T_s);
+  require(R == st.stats.final_radius && T == st.stats.final_time_half_width && r_s == st.stats.final_surface_radius &&
+              T_s == st.stats.final_surface_time_half_width,
+          "its bandwidths after " + std::to_string(done) +
+              " iterations differ from this schedule's (initial radii, time half-widths, alpha or frame mode changed)");
 }
 
 struct Counters {
@@ -273,7 +339,7 @@ void trace_camera_path(const CameraPass& p, int px, int py, std::vector<std::uin
       medium = hit.medium_after;
     }
     if (depth_c >= st.rr_depth) {
-      const double q = std::min(1.0, max_component(weight));
+      const double q = std::min(kMaxSurvival, max_component(weight));
       if (!(rng.next_double() < q)) return;
       weight = weight / q;
     }
@@ -313,23 +379,52 @@ void surface_bandwidths(FrameMode mode, const RenderSettings& s, long iteration,
   }
 }
 
-RenderResult render(const Scene& scene, const RenderSettings& settings, const ProgressCallback& progress) {
+double render_memory_bytes(const Scene& scene, const RenderSettings& s, bool state_copy) {
+  const double px3 = double(std::max(0, scene.camera.width)) * double(std::max(0, scene.camera.height)) * 3.0;
+  const double values = px3 * (3.0 + film_frame_count(scene.film));  // steady, early, late and the frames
+  const double snapshots = s.snapshot_every > 0 && s.time_budget_s <= 0 ? double(s.iterations / s.snapshot_every) : 0.0;
+  const double snapshot_bytes = snapshots * px3 * sizeof(float);
+  // Sums and per-iteration buffers in double, the float32 results built while the sums still live.
+  double bytes = values * (2 * sizeof(double) + sizeof(float)) + snapshot_bytes;
+  if (state_copy) bytes += values * sizeof(double) + snapshot_bytes;
+  return bytes;
+}
+
+void check_memory_budget(const Scene& scene, const RenderSettings& s, bool state_copy) {
+  if (s.memory_budget_gib <= 0) return;
+  const double bytes = render_memory_bytes(scene, s, state_copy);
+  if (bytes <= s.memory_budget_gib * double(1ull << 30)) return;
+  char budget[32];
+  std::snprintf(budget, sizeof budget, "%g", s.memory_budget_gib);
+  throw std::invalid_argument(
+      "the film needs " + gib_text(bytes) + " for its image buffers (" + std::to_string(film_frame_count(scene.film)) +
+      " frames of " + std::to_string(scene.camera.width) + " x " + std::to_string(scene.camera.height) +
+      " px, summed in double precision), more than render.memory_budget_gib = " + budget +
+      "; lower scene.film.temporal_bins or scene.camera.width/height, or raise render.memory_budget_gib "
+      "(frames are not split into chunks: every pair splats into all its frames in one pass)");
+}
+
+RenderResult render(const Scene& scene, const RenderSettings& settings, const ProgressCallback& progress,
+                    std::optional<RenderState> resume, const CheckpointCallback& checkpoint) {
   validate(settings);
+  check_memory_budget(scene, settings, resume.has_value() || (checkpoint && (settings.checkpoint_every_iterations > 0 ||
+                                                                        settings.checkpoint_every_s > 0)));
   const auto t_start = Clock::now();
   const CompiledScene cs(scene);
   const Camera& cam = scene.camera;
   const Film& film = scene.film;
   const int W = cam.width, H = cam.height;
-  const int F = film.mode == FrameMode::Steady ? 0 : film.temporal_bins;
+  const int F = film_frame_count(film);
   const std::size_t px_count = std::size_t(W) * H;
   const std::size_t frame_values = std::size_t(F) * px_count * 3;
 
-  RenderResult result;
-  result.width = W;
-  result.height = H;
-  result.frame_count = F;
-  std::vector<double> acc_steady(px_count * 3, 0.0), acc_early(px_count * 3, 0.0), acc_late(px_count * 3, 0.0);
-  std::vector<double> acc_frames(frame_values, 0.0);
+  if (resume) validate_resume(*resume, scene, settings, W, H, F);
+  RenderState state = resume ? std::move(*resume) : fresh_state(W, H, F, settings.seed);
+  resume.reset();
+  RenderStats& stats = state.stats;
+  stats.cancelled = false;
+  const double time_before = stats.time_total_s;  // render time of the runs this one continues
+  auto elapsed = [&] { return time_before + seconds_since(t_start); };
   std::vector<double> it_steady(px_count * 3), it_early(px_count * 3), it_late(px_count * 3), it_frames(frame_values);
 
   CameraPass pass{};
@@ -360,8 +455,34 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   const std::thread::id caller = std::this_thread::get_id();
   std::atomic<bool> cancel{false};
   auto last_report = Clock::now();
-  Counters counters;
-  RenderStats& stats = result.stats;
+  auto last_checkpoint = Clock::now();
+  int checkpointed_iterations = stats.iterations_done;
+  Counters counters;  // continue the resumed totals
+  counters.queries = stats.queries;
+  counters.candidates = stats.candidates;
+  counters.pairs = stats.pair_evaluations;
+  counters.parallel = stats.parallel_rejected;
+  counters.false_positives = stats.false_positives;
+  counters.surface_queries = stats.surface_queries;
+  counters.surface_pairs = stats.surface_pairs;
+  auto sync_counters = [&] {
+    stats.queries = counters.queries;
+    stats.candidates = counters.candidates;
+    stats.pair_evaluations = counters.pairs;
+    stats.parallel_rejected = counters.parallel;
+    stats.false_positives = counters.false_positives;
+    stats.surface_queries = counters.surface_queries;
+    stats.surface_pairs = counters.surface_pairs;
+  };
+  const bool checkpointing =
+      checkpoint && (settings.checkpoint_every_iterations > 0 || settings.checkpoint_every_s > 0);
+  auto save_checkpoint = [&] {
+    sync_counters();
+    stats.time_total_s = elapsed();
+    checkpointed_iterations = stats.iterations_done;
+    last_checkpoint = Clock::now();
+    return checkpoint(state);
+  };
   const int tiles_x = (W + settings.tile_size - 1) / settings.tile_size;
   const int tiles_y = (H + settings.tile_size - 1) / settings.tile_size;
   const long max_iterations = settings.time_budget_s > 0 ? (1L << 40) : settings.iterations;
@@ -370,8 +491,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
 
   auto report = [&](int done, double R, double T, std::uint64_t nbeams, double r_s, std::uint64_t nphotons) {
     if (!progress) return;
-    Progress pr{done, settings.time_budget_s > 0 ? -1 : settings.iterations, seconds_since(t_start), R, T, nbeams,
-                r_s, nphotons};
+    Progress pr{done, settings.time_budget_s > 0 ? -1 : settings.iterations, elapsed(), R, T, nbeams, r_s, nphotons};
     last_report = Clock::now();
     if (!progress(pr)) cancel.store(true);
   };
@@ -379,8 +499,8 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   std::vector<Beam> beams;
   std::vector<SurfacePhoton> photons;
   SurfacePhotonGrid photon_grid;
-  for (long it = 0; it < max_iterations && !cancel.load(); ++it) {
-    if (settings.time_budget_s > 0 && it > 0 && seconds_since(t_start) >= settings.time_budget_s) break;
+  for (long it = stats.iterations_done; it < max_iterations && !cancel.load(); ++it) {
+    if (settings.time_budget_s > 0 && it > 0 && elapsed() >= settings.time_budget_s) break;
     double R, T;
     iteration_bandwidths(film.mode, settings, it, R, T);
     if (film.mode == FrameMode::Gate) T = std::max(T, 0.0);
@@ -452,12 +572,12 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     stats.time_camera_s += seconds_since(t0);
     if (cancel.load()) break;  // the unfinished iteration is dropped
 
-    for (std::size_t i = 0; i < acc_steady.size(); ++i) {
-      acc_steady[i] += it_steady[i];
-      acc_early[i] += it_early[i];
-      acc_late[i] += it_late[i];
+    for (std::size_t i = 0; i < state.steady.size(); ++i) {
+      state.steady[i] += it_steady[i];
+      state.early[i] += it_early[i];
+      state.late[i] += it_late[i];
     }
-    for (std::size_t i = 0; i < frame_values; ++i) acc_frames[i] += it_frames[i];
+    for (std::size_t i = 0; i < frame_values; ++i) state.frames[i] += it_frames[i];
     stats.iterations_done = int(it + 1);
     stats.light_paths += M;
     stats.beams += beams.size();
@@ -468,23 +588,27 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     stats.final_surface_radius = photon_grid.radius();
     stats.final_surface_time_half_width = T_s;
     if (settings.snapshot_every > 0 && (it + 1) % settings.snapshot_every == 0) {
-      std::vector<float> snap(acc_steady.size());
-      for (std::size_t i = 0; i < snap.size(); ++i) snap[i] = float(acc_steady[i] / double(it + 1));
-      result.snapshots.push_back(std::move(snap));
-      result.snapshot_iterations.push_back(int(it + 1));
-      result.snapshot_seconds.push_back(seconds_since(t_start));
+      std::vector<float> snap(state.steady.size());
+      for (std::size_t i = 0; i < snap.size(); ++i) snap[i] = float(state.steady[i] / double(it + 1));
+      state.snapshots.push_back(std::move(snap));
+      state.snapshot_iterations.push_back(int(it + 1));
+      state.snapshot_seconds.push_back(elapsed());
     }
     report(int(it + 1), R, T, beams.size(), r_s, photons.size());
+    // No checkpoint after the last planned iteration: the result itself follows at once.
+    const bool due = (settings.checkpoint_every_iterations > 0 && (it + 1) % settings.checkpoint_every_iterations == 0) ||
+                     (settings.checkpoint_every_s > 0 && seconds_since(last_checkpoint) >= settings.checkpoint_every_s);
+    if (checkpointing && due && it + 1 < max_iterations && !cancel.load() && !save_checkpoint()) cancel.store(true);
   }
 
+  // A cancelled run keeps its completed iterations for a later resume.
+  if (checkpointing && cancel.load() && stats.iterations_done > checkpointed_iterations) save_checkpoint();
+  sync_counters();
   stats.cancelled = cancel.load();
-  stats.queries = counters.queries;
-  stats.candidates = counters.candidates;
-  stats.pair_evaluations = counters.pairs;
-  stats.parallel_rejected = counters.parallel;
-  stats.false_positives = counters.false_positives;
-  stats.surface_queries = counters.surface_queries;
-  stats.surface_pairs = counters.surface_pairs;
+  RenderResult result;
+  result.width = W;
+  result.height = H;
+  result.frame_count = F;
   const double inv_n = stats.iterations_done > 0 ? 1.0 / stats.iterations_done : 0.0;
   auto to_float = [&](const std::vector<double>& src, std::vector<float>& dst, double* total) {
     dst.resize(src.size());
@@ -492,11 +616,15 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     for (std::size_t i = 0; i < src.size(); ++i) { dst[i] = float(src[i] * inv_n); sum += src[i] * inv_n; }
     if (total) *total = sum;
   };
-  to_float(acc_steady, result.steady, &stats.steady_total);
-  to_float(acc_early, result.early, &stats.early_total);
-  to_float(acc_late, result.late, &stats.late_total);
-  to_float(acc_frames, result.frames, nullptr);
-  stats.time_total_s = seconds_since(t_start);
+  to_float(state.steady, result.steady, &stats.steady_total);
+  to_float(state.early, result.early, &stats.early_total);
+  to_float(state.late, result.late, &stats.late_total);
+  to_float(state.frames, result.frames, nullptr);
+  stats.time_total_s = elapsed();
+  result.stats = stats;
+  result.snapshot_iterations = std::move(state.snapshot_iterations);
+  result.snapshot_seconds = std::move(state.snapshot_seconds);
+  result.snapshots = std::move(state.snapshots);
   return result;
 }
 

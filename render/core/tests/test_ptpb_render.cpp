@@ -1,6 +1,6 @@
 // Render-level tests of the PTPB core: analytic single scattering, energy bookkeeping of bins,
-// thread invariance, grid/BVH agreement, the schedule actually reaching the structure, and
-// input validation.
+// thread invariance, grid/BVH agreement, the schedule actually reaching the structure, input
+// validation, checkpoints and resume, and the memory budget.
 #include <cmath>
 #include <cstring>
 
@@ -193,6 +193,146 @@ TEST_CASE("cancellation keeps the completed iterations") {
   CHECK(r.stats.cancelled);
   CHECK(r.stats.iterations_done == 2);
   CHECK(calls >= 2);
+}
+
+bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+}
+
+TEST_CASE("a render resumed from a checkpoint has the bits of an uninterrupted one") {
+  for (FrameMode mode : {FrameMode::Bins, FrameMode::Gate}) {
+    Scene sc = cube_scene();
+    sc.film.mode = mode;
+    RenderSettings s = small_settings();
+    s.iterations = 5;
+    s.alpha = mode == FrameMode::Gate ? 2.0 / 3.0 : 0.8;
+    s.snapshot_every = 2;
+    s.checkpoint_every_iterations = 2;
+    std::vector<RenderState> states;
+    const RenderResult whole = render(sc, s, nullptr, std::nullopt, [&](const RenderState& st) {
+      states.push_back(st);
+      return true;
+    });
+    CHECK(states.size() == 2);  // after iterations 2 and 4; none after the last
+    if (states.size() != 2) continue;
+    CHECK(states[0].stats.iterations_done == 2 && states[1].stats.iterations_done == 4);
+    s.threads = 2;  // thread invariance carries over to a resumed run
+    const RenderResult resumed = render(sc, s, nullptr, states[0]);
+    CHECK(resumed.stats.iterations_done == 5);
+    CHECK(same_bits(whole.steady, resumed.steady) && same_bits(whole.frames, resumed.frames));
+    CHECK(same_bits(whole.early, resumed.early) && same_bits(whole.late, resumed.late));
+    CHECK(resumed.stats.pair_evaluations == whole.stats.pair_evaluations);
+    CHECK(resumed.stats.light_paths == whole.stats.light_paths && resumed.stats.beams == whole.stats.beams);
+    CHECK(resumed.snapshot_iterations == whole.snapshot_iterations);
+    CHECK(resumed.snapshots.size() == 2 && same_bits(resumed.snapshots[1], whole.snapshots[1]));
+    // Nothing left to do: the state of iteration 4 of 4 gives the average of its 4 iterations.
+    s.iterations = 4;
+    const RenderResult done = render(sc, s, nullptr, states[1]);
+    CHECK(done.stats.iterations_done == 4 && done.stats.steady_total > 0);
+  }
+}
+
+TEST_CASE("a resume state from other settings or another film is refused with the reason") {
+  const Scene sc = cube_scene();
+  RenderSettings s = small_settings();
+  s.checkpoint_every_iterations = 1;
+  std::vector<RenderState> states;
+  render(sc, s, nullptr, std::nullopt, [&](const RenderState& st) { states.push_back(st); return true; });
+  CHECK(states.size() == 2);
+  if (states.empty()) return;
+  auto message = [&](const Scene& scene, const RenderSettings& settings) -> std::string {
+    try {
+      render(scene, settings, nullptr, states[0]);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "";
+  };
+  RenderSettings other = s;
+  other.initial_beam_radius *= 1.5;
+  CHECK(message(sc, other).find("bandwidths") != std::string::npos);
+  other = s;
+  other.seed += 1;
+  CHECK(message(sc, other).find("seed") != std::string::npos);
+  other = s;
+  other.iterations = 1;  // fewer than the state of iteration 2 holds
+  try {
+    render(sc, other, nullptr, states[1]);
+    CHECK(false);
+  } catch (const std::invalid_argument& e) {
+    CHECK(std::string(e.what()).find("more than settings.iterations") != std::string::npos);
+  }
+  Scene wide = sc;
+  wide.camera.width += 1;
+  CHECK(message(wide, s).find("film") != std::string::npos);
+  RenderState damaged = states[0];
+  damaged.frames[7] = std::nan("");
+  try {
+    render(sc, s, nullptr, damaged);
+    CHECK(false);
+  } catch (const std::invalid_argument& e) {
+    CHECK(std::string(e.what()).find("damaged") != std::string::npos);
+  }
+}
+
+TEST_CASE("a cancelled render hands its completed iterations to the checkpoint callback") {
+  RenderSettings s = small_settings();
+  s.iterations = 10;
+  s.checkpoint_every_iterations = 100;  // never due: only the cancellation checkpoints
+  std::vector<int> saved;
+  const RenderResult r = render(cube_scene(), s, [](const Progress& p) { return p.iteration < 2; }, std::nullopt,
+                                [&](const RenderState& st) { saved.push_back(st.stats.iterations_done); return true; });
+  CHECK(r.stats.cancelled && r.stats.iterations_done == 2);
+  CHECK(saved.size() == 1 && saved[0] == 2);
+  // A false return from the checkpoint callback cancels like the progress callback.
+  s.checkpoint_every_iterations = 1;
+  saved.clear();
+  const RenderResult c = render(cube_scene(), s, nullptr, std::nullopt,
+                                [&](const RenderState& st) { saved.push_back(st.stats.iterations_done); return false; });
+  CHECK(c.stats.cancelled && c.stats.iterations_done == 1 && saved.size() == 1);
+}
+
+TEST_CASE("a film over the memory budget is refused before it is allocated") {
+  Scene sc = cube_scene();  // 24 x 20 px, 40 bins
+  RenderSettings s = small_settings();
+  const double values = 24.0 * 20 * 3 * (3 + 40);
+  CHECK(render_memory_bytes(sc, s, false) == values * 20);  // double sums + double iteration buffers + float32
+  CHECK(render_memory_bytes(sc, s, true) == values * 28);
+  s.snapshot_every = 1;
+  CHECK(render_memory_bytes(sc, s, false) == values * 20 + 3 * 24.0 * 20 * 3 * 4);
+  s = small_settings();
+  sc.film.temporal_bins = 100000;
+  sc.camera.width = sc.camera.height = 4096;  // 37.5 TiB of buffers
+  try {
+    render(sc, s);
+    CHECK(false);
+  } catch (const std::invalid_argument& e) {
+    const std::string what = e.what();
+    CHECK(what.find("render.memory_budget_gib = 8") != std::string::npos);
+    CHECK(what.find("scene.film.temporal_bins") != std::string::npos);
+    CHECK(what.find("scene.camera.width/height") != std::string::npos);
+  }
+  sc = cube_scene();
+  s.memory_budget_gib = 1e-4;  // 105 kB < 1.2 MB
+  CHECK_THROWS(render(sc, s));
+  s.memory_budget_gib = 0;  // no limit
+  CHECK(render(sc, s).stats.iterations_done == 3);
+}
+
+TEST_CASE("a lossless medium with unbounded depth terminates: roulette survival is capped") {
+  Scene sc = cube_scene();
+  sc.media[0].sigma_s = {1e4, 1e4, 1e4};  // optical depth 1e4 across the cube, albedo exactly 1
+  sc.media[0].sigma_a = {0, 0, 0};
+  sc.film.mode = FrameMode::Steady;
+  RenderSettings s = small_settings();
+  s.iterations = 1;
+  s.light_paths_per_iteration = 500;
+  s.max_depth = -1;
+  const RenderResult r = render(sc, s);
+  bool finite = true;
+  for (float v : r.steady) finite = finite && std::isfinite(v);
+  CHECK(finite && r.stats.beams > 0);
+  CHECK(double(r.stats.beams) / r.stats.light_paths < 100);  // ~rr_depth + 1/(1 - 0.95) beams per path
 }
 
 PTPB_TEST_MAIN()

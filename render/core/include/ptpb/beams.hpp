@@ -37,6 +37,11 @@ struct LightRecords {
 void trace_light_path(const CompiledScene& scene, const RenderSettings& settings,
                       std::uint64_t iteration, std::uint64_t path_index, LightRecords& out);
 
+// Russian roulette keeps a path with probability min(kMaxSurvival, throughput ratio) on both
+// sides, as Mitsuba's volpath does: a lossless medium (albedo 1) or total internal reflection
+// would otherwise keep q = 1 and a path alive without bound.
+constexpr double kMaxSurvival = 0.95;
+
 // Exponential free-flight helpers shared by light and camera tracing (channel-average mixture).
 inline double survival_mixture(const Vec3d& sigma_t, double s) {
   return (std::exp(-sigma_t.x * s) + std::exp(-sigma_t.y * s) + std::exp(-sigma_t.z * s)) / 3.0;

@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <exception>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -52,7 +53,12 @@ void parallel_for_chunks(std::size_t n, std::size_t chunk, int threads, Body&& b
   } else {
     std::vector<std::thread> pool;
     pool.reserve(static_cast<std::size_t>(worker_count - 1));
-    for (int i = 1; i < worker_count; ++i) pool.emplace_back(worker);
+    try {
+      for (int i = 1; i < worker_count; ++i) pool.emplace_back(worker);
+    } catch (const std::system_error&) {
+      // No more threads to be had: the ones started share the chunks (same result, chunks are fixed),
+      // and no joinable thread is ever destroyed, which would std::terminate.
+    }
     worker();
     for (auto& t : pool) t.join();
   }

@@ -43,6 +43,12 @@ struct RenderSettings {
   double transmittance_cutoff = 1e-4;  // long beams/queries end where max-channel Tr drops below
   int tile_size = 16;
   int snapshot_every = 0;              // > 0: keep the steady average every k iterations
+  // Checkpoints (§9): hand the accumulated state to the checkpoint callback every k iterations
+  // and/or after this much wall time since the last one; 0 = never.
+  int checkpoint_every_iterations = 0;
+  double checkpoint_every_s = 0.0;
+  // render() refuses a film whose buffers (render_memory_bytes) exceed this many GiB; 0 = no limit.
+  double memory_budget_gib = 8.0;
 };
 
 struct Progress {
@@ -73,6 +79,26 @@ struct RenderStats {
   double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check
 };
 
+// The accumulated state of a progressive render after stats.iterations_done iterations: the sums
+// of the per-iteration estimates (not averages), the counters and timings, and the snapshots.
+// Random streams are keyed by (seed, iteration, index) (§9), so a render resumed from it gives
+// the same bits as one that was never interrupted. stats.final_* hold the bandwidths of the last
+// completed iteration and stats.time_total_s the render time so far (time budgets continue it).
+struct RenderState {
+  int width = 0, height = 0, frame_count = 0;
+  std::uint64_t seed = 0;
+  std::vector<double> steady, early, late;  // H x W x 3
+  std::vector<double> frames;               // F x H x W x 3
+  RenderStats stats;
+  std::vector<int> snapshot_iterations;
+  std::vector<double> snapshot_seconds;
+  std::vector<std::vector<float>> snapshots;
+};
+
+// Called on the calling thread between iterations (and once more when a run is cancelled);
+// returns false to cancel.
+using CheckpointCallback = std::function<bool(const RenderState&)>;
+
 struct RenderResult {
   int width = 0, height = 0, frame_count = 0;
   std::vector<float> steady;  // H x W x 3
@@ -85,8 +111,24 @@ struct RenderResult {
 };
 
 // Validates scene and settings (std::invalid_argument naming the parameter) and renders.
+// `resume`: continue from a state an earlier run of the same scene and settings handed to its
+// checkpoint callback (refused when its film, seed or bandwidth schedule differ). `checkpoint`
+// receives the state as settings.checkpoint_every_* ask.
 RenderResult render(const Scene& scene, const RenderSettings& settings,
-                    const ProgressCallback& progress = nullptr);
+                    const ProgressCallback& progress = nullptr, std::optional<RenderState> resume = std::nullopt,
+                    const CheckpointCallback& checkpoint = nullptr);
+
+// Peak bytes of render()'s image buffers (§9 "Memory"): the double sums and the double
+// per-iteration buffers of steady, early and late (H W 3 each) and of the frames (F H W 3), the
+// float32 results made from the sums at the end, and the float32 steady snapshots. With
+// `state_copy` (a checkpoint callback or a resume state) one more copy of the sums and snapshots.
+// Frames are never split into chunks: every ray-beam pair splats into all the frames its kernel
+// covers within one pass, so a film that does not fit is refused instead.
+double render_memory_bytes(const Scene& scene, const RenderSettings& settings, bool state_copy);
+
+// Throws std::invalid_argument, naming the keys that shrink the film or raise the budget, when
+// render_memory_bytes exceeds settings.memory_budget_gib; render() calls it before allocating.
+void check_memory_budget(const Scene& scene, const RenderSettings& settings, bool state_copy);
 
 // Bandwidths of iteration i for a film mode (§6): gate shrinks R and T with gamma^(1/2),
 // bins/steady shrink R with gamma.

@@ -1,0 +1,120 @@
+"""Resuming interrupted renders: the runner's checkpoint folder outlives the staging swap only under
+--resume, and `pipeline run --resume` after Ctrl-C continues the render to the bits of an
+uninterrupted one, or refuses a checkpoint of other settings with the setting that changed."""
+from __future__ import annotations
+
+import hashlib
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from pipeline.config import load_config
+from pipeline.runner import Stage, checkpoint_dir, run_stages
+
+
+@pytest.fixture
+def config_file(tmp_path):
+    path = tmp_path / "toy.yaml"
+    path.write_text(f"seed: 1\nthreads: 1\nruns_dir: {tmp_path / 'runs'}\n")
+    return path
+
+
+def test_checkpoint_folder_is_kept_only_for_resume_and_removed_once_published(config_file, tmp_path):
+    seen: list[bool] = []
+
+    def resumable(ctx):
+        progress = ctx.checkpoint_dir / "progress.txt"
+        seen.append(progress.exists())
+        progress.parent.mkdir(parents=True, exist_ok=True)
+        progress.write_text("half\n")
+        if ctx.config.threads == 1:
+            raise KeyboardInterrupt  # stands for Ctrl-C: the stage stops and keeps its progress
+        (ctx.out_dir / "done.txt").write_text("done\n")
+
+    stages = [Stage("work", resumable, ("seed",))]
+    folder = checkpoint_dir(tmp_path / "runs" / "toy", "work")
+    with pytest.raises(KeyboardInterrupt):
+        run_stages(load_config(config_file), stages, quiet=True)
+    assert (folder / "progress.txt").exists() and seen == [False]
+    # Without --resume the stale progress is removed before the stage starts.
+    with pytest.raises(KeyboardInterrupt):
+        run_stages(load_config(config_file), stages, quiet=True)
+    assert seen == [False, False]
+    # With --resume the stage finds it; publishing the finished output removes it.
+    run_stages(load_config(config_file, ["threads=2"]), stages, quiet=True, resume=True)
+    assert seen == [False, False, True] and not folder.exists()
+    assert (tmp_path / "runs" / "toy" / "work" / "done.txt").exists()
+
+
+CONFIG = """
+name: resumed
+seed: 5
+threads: 2
+runs_dir: {runs}
+scene:
+  media:
+    snow: {{coefficients: {{sigma_s: [3.0, 2.5, 2.0], sigma_a: [0.3, 0.1, 0.05], g: 0.3}}}}
+  objects:
+    - {{name: block, shape: box, medium: snow, center: [0, 0, -0.5], size: [2, 2, 1]}}
+  camera: {{placement: look_at, origin: [0, -4, 3], target: [0, 0, -0.3], width: 20, height: 14, fov: 45}}
+  sun: {{kind: directional, elevation_deg: 60, azimuth_deg: 30, irradiance: 100.0}}
+  sky: {{radiance: 0.0}}
+  film: {{mode: transient, temporal_bins: 10, frame_mode: bins, window: auto, window_tail_opl: 1.0}}
+  max_depth: 16
+reference: {{steady: false, transient: false}}
+render: {{iterations: 80, snapshot_every: 10, light_paths_per_iteration: 1000, checkpoint_every_iterations: 5,
+          frame_mode: gate, initial_beam_radius: {{value: 0.03, unit: m}}}}
+composite: {{video_min_height: 64}}
+"""
+
+
+def cli(config: Path, *args: str, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pipeline", "run", str(config), "--quiet", "--stage", "scene",
+                           "--stage", "render", *args], cwd=config.parent, capture_output=True, text=True, timeout=300,
+                          **kwargs)
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path):
+    config = tmp_path / "resumed.yaml"
+    config.write_text(CONFIG.format(runs=tmp_path / "runs"))
+    run = tmp_path / "runs" / "resumed"
+    checkpoint = run / ".render.checkpoint" / "checkpoint.npz"
+    process = subprocess.Popen([sys.executable, "-m", "pipeline", "run", str(config), "--quiet", "--stage", "scene",
+                                "--stage", "render"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    deadline = time.monotonic() + 120
+    while not checkpoint.exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "continue with `pipeline run --resume`" in stdout + stderr  # log lines go through tqdm.write
+    assert checkpoint.exists() and not (run / "render").exists()
+
+    # Another setting: the checkpoint is refused, naming it; nothing is rendered.
+    refused = cli(config, "--resume", "--set", "render.initial_beam_radius.value=0.04")
+    assert refused.returncode == 1
+    assert "initial_beam_radius 0.03 -> 0.04" in refused.stderr and "run without --resume" in refused.stderr
+    assert checkpoint.exists()
+
+    resumed = cli(config, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert not checkpoint.parent.exists()
+    bits = {name: digest(run / "render" / name) for name in ("frames.npy", "steady.npy")}
+    stats = json.loads((run / "render" / "stats.json").read_text())
+    assert stats["iterations"] == 80
+
+    # The same render without interruption, into another runs folder: byte-equal frames and image.
+    fresh = cli(config, "--set", f"runs_dir={tmp_path / 'fresh'}")
+    assert fresh.returncode == 0, fresh.stderr
+    fresh_run = tmp_path / "fresh" / "resumed" / "render"
+    assert {name: digest(fresh_run / name) for name in bits} == bits
