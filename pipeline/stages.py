@@ -39,7 +39,7 @@ def render_stage(ctx: StageContext) -> dict:
     from render.ptpb_stage import run_render_stage
 
     return run_render_stage(ctx.inputs["scene"], ctx.config.render, ctx.out_dir, seed=ctx.config.seed,
-                            threads=ctx.config.threads, quiet=ctx.quiet)
+                            threads=ctx.config.threads, quiet=ctx.quiet, checkpoint_dir=ctx.checkpoint_dir)
 
 
 def composite_stage(ctx: StageContext) -> dict:
