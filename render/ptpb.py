@@ -19,7 +19,6 @@ channels (no hero wavelength), as in ptpb.md §3.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
@@ -56,19 +55,11 @@ def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:
 
 
 def _tan_half_fov_x(cam: dict) -> float:
-    w, h = cam["width"], cam["height"]
-    t = math.tan(math.radians(cam["fov"]) / 2)
-    axis = cam.get("fov_axis", "x")
-    if axis == "smaller":
-        axis = "x" if w <= h else "y"
-    if axis == "larger":
-        axis = "x" if w >= h else "y"
-    aspect = w / h
-    if axis == "x":
-        return t
-    if axis == "y":
-        return t * aspect
-    return t * aspect / math.sqrt(1 + aspect * aspect)
+    from render.scene import Camera, tan_half_fov
+
+    fov_only = Camera((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0), cam["fov"], cam["width"], cam["height"],
+                      cam.get("fov_axis", "x"))
+    return tan_half_fov(fov_only)[0]
 
 
 def _resolve_radius(spec: BeamRadius, scene: dict, centre: np.ndarray, radius: float) -> float:
