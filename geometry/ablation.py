@@ -1,12 +1,17 @@
 """Radiative ablation of a periodic height field (penitentes.md 3.8-3.12, 5, 6).
 
-    dh/dt = - eps Q / (rho L_eff) sqrt(1 + |grad h|^2) + D lap h - K lap^2 h  [+ A_B (-(-lap)^(1/2) h)]
+    dh/dt = - eps k (1 - a) / (rho L_eff) * [ E_dir,h + (E_sky + E_ter) sqrt(1 + |grad h|^2) ]
+            + D lap h - K lap^2 h  [+ A_B (-(-lap)^(1/2) h)]
 
-Q is the absorbed shortwave per unit true area (geometry.irradiance), L_eff blends sublimation and
-melt through Lliboutry's switch, and the linear terms are integrated exactly in Fourier space.
-Time stepping freezes the geometry for each horizon refresh (one per simulated day by default),
-integrates the absorbed energy over that period's sun positions, and applies it in sub-steps that
-each respect the Hamilton-Jacobi CFL limit (6.2). Heights are [m], times [s].
+E_dir,h = S_b V_sun max(0, s_z - s . grad h) is the direct beam per unit horizontal area; under one
+sun it is an advection along the beam, so the slope is upwinded on the sun's side. Sky and terrain
+light are per unit true area and recede along the normal (Godunov factor). L_eff blends
+sublimation and melt through Lliboutry's switch; k = max(0, Q - sink) / Q keeps the part of each
+day's absorbed shortwave Q above the loss to the sky (geometry.sky_loss times the sky view). The
+linear terms are integrated exactly in Fourier space on flux time. Time stepping freezes the
+geometry for each horizon refresh (one per simulated day by default), integrates the absorbed
+energy over that period's sun positions, and applies it in sub-steps that each respect the
+Hamilton-Jacobi CFL limit (6.2). Heights are [m], times [s].
 """
 from __future__ import annotations
 
@@ -42,7 +47,8 @@ def spectral_linear_step(h: np.ndarray, spacing: float, duration: float, scatter
                          diffusivity: float, hyperdiffusivity: float) -> np.ndarray:
     """Exact (exponential-integrator) step of the linear terms over ``duration`` [s] (6.2).
 
-    The Betterton term A_B|k| is weighted by ``duration`` as given; callers scale it by the flux.
+    grow_field passes the flux time (time integral of the horizontal flux over the reference flux),
+    so A_B and D scale together with the sun and the band stays at lambda* = 4 pi D / A_B.
     """
     kx, ky = wavenumbers(h.shape[0], spacing)
     sigma = linear_growth_rate(np.hypot(kx, ky), scattered_coefficient, diffusivity, hyperdiffusivity)
@@ -81,6 +87,15 @@ def melt_fraction(exposure: np.ndarray, centre: float, width: float) -> np.ndarr
     return np.clip((centre - exposure) / width, 0.0, 1.0)
 
 
+def net_energy_fraction(absorbed: np.ndarray, sink: np.ndarray) -> np.ndarray:
+    """Share of the absorbed energy left for ablation after the sink, max(0, absorbed - sink) / absorbed [-].
+
+    The sink is net longwave and turbulent loss, which scales with the sky view: a trough's walls
+    trade longwave with each other at the same temperature, an exposed crest radiates to a cold sky.
+    """
+    return np.divide(np.maximum(absorbed - sink, 0.0), absorbed, out=np.zeros_like(absorbed), where=absorbed > 0)
+
+
 def inverse_latent_heat(melt: np.ndarray) -> np.ndarray:
     """1 / L_eff = w / L_f + (1 - w) / L_s [kg J-1]."""
     return melt / LATENT_HEAT_FUSION + (1.0 - melt) / LATENT_HEAT_SUBLIMATION
@@ -98,6 +113,29 @@ def godunov_slope_factor(h: np.ndarray, spacing: float, max_slope_deg: float) ->
     limit2 = np.tan(np.radians(max_slope_deg)) ** 2
     clamped = grad2 > limit2
     return np.sqrt(1.0 + np.minimum(grad2, limit2)), float(clamped.mean())
+
+
+def sunward_slopes(h: np.ndarray, spacing: float, sun: np.ndarray, max_slope_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided slopes (dh/dx, dh/dy) taken on the sun's side of each cell, the upwind differences of
+    the direct-beam lowering (see direct_beam_lowering), clamped in magnitude at ``max_slope_deg``."""
+    p = (np.roll(h, -1, axis=1) - h) / spacing if sun[0] >= 0 else (h - np.roll(h, 1, axis=1)) / spacing
+    q = (np.roll(h, -1, axis=0) - h) / spacing if sun[1] >= 0 else (h - np.roll(h, 1, axis=0)) / spacing
+    grad = np.hypot(p, q)
+    limit = np.tan(np.radians(max_slope_deg))
+    scale = np.where(grad > limit, limit / np.maximum(grad, 1e-300), 1.0)
+    return p * scale, q * scale
+
+
+def direct_beam_lowering(p: np.ndarray, q: np.ndarray, sun: np.ndarray) -> np.ndarray:
+    """Unshadowed direct beam per unit horizontal area and unit direct-normal irradiance [-], from
+    sunward slopes p, q (sunward_slopes).
+
+    max(0, n.s) sqrt(1 + |grad h|^2) = max(0, s_z - s_x p - s_y q) is linear in the slope: under one
+    sun the surface recedes along the beam (an advection), so the slopes must be upwinded on the
+    sun's side. Central slopes times the symmetric Godunov factor treat every crest and trough
+    bottom as if the sun stood overhead and erase the sun-facing/shaded wall asymmetry.
+    """
+    return np.clip(sun[2] - sun[0] * p - sun[1] * q, 0.0, None)
 
 
 def initial_height_field(n: int, spacing: float, rms: float, wavelength: float,
@@ -159,6 +197,7 @@ class GrowthSettings:
     azimuths: int
     bounces: int
     max_slope_deg: float
+    sky_loss: float  # net longwave + turbulent loss of a facet open to the sky, day mean [W m-2]
     cfl: float
     snapshots: int
 
@@ -180,6 +219,38 @@ class GrowthResult:
     timings: dict = field(default_factory=dict)
 
 
+def _period_energy(h: np.ndarray, spacing: float, s: GrowthSettings, sun: sunpath.DailySun, chunk: np.ndarray,
+                   horizons: irradiance.Horizons) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Absorbed shortwave of one frozen-geometry period, split for the recession step.
+
+    Returns the direct beam per unit horizontal area and the sky + terrain light per unit true
+    area, both absorbed and net of the period's share of the loss to the sky [J m-2]; the gross
+    absorbed flux per unit true area [J m-2]; and the period's flux time [s] (time integral of the
+    horizontal incident flux over the reference flux).
+    """
+    absorptance = 1.0 - s.albedo
+    direct_h = np.zeros_like(h)  # per horizontal area
+    direct = np.zeros_like(h)  # per true area
+    sky = np.zeros_like(h)
+    flux_seconds = 0.0
+    for j in chunk:
+        vector, duration = sun.vectors[j], float(sun.durations[j])
+        elevation = float(np.arcsin(vector[2]))
+        s_b, s_d = s.sky.direct_normal(elevation), s.sky.diffuse_horizontal(elevation)
+        flux_seconds += duration * (s_b * np.sin(elevation) + s_d) / s.scattered_reference_flux
+        p, q = sunward_slopes(h, spacing, vector, s.max_slope_deg)
+        beam = duration * s_b * irradiance.sun_visibility(h, spacing, vector) * direct_beam_lowering(p, q, vector)
+        direct_h += beam
+        direct += beam / np.sqrt(1.0 + p * p + q * q)
+        sky += duration * s_d * horizons.sky_view
+    terrain = irradiance.bounce_terrain_light(direct + sky, s.albedo, spacing, horizons, s.bounces)
+    absorbed = absorptance * (direct + sky + terrain)
+    # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
+    share = float(sun.durations[chunk].sum() / sun.durations.sum())
+    kept = net_energy_fraction(absorbed, s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view)
+    return absorptance * direct_h * kept, absorptance * (sky + terrain) * kept, absorbed, flux_seconds
+
+
 def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np.random.Generator,
                progress: Callable[[int], None] | None = None) -> GrowthResult:
     """Grow a field from ``h0`` over ``settings.days`` days of sun (penitentes.md section 5)."""
@@ -187,12 +258,11 @@ def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np
 
     h = irradiance.check_height_field(h0, "initial height field").copy()
     s = settings
-    n = h.shape[0]
     snapshot_every = max(1, int(np.ceil(s.days / max(1, s.snapshots - 1))))
     snapshots, snapshot_days = [h.copy()], [0.0]
     relief = [float(h.std())]
     clamp_sum, clamp_count, max_change = 0.0, 0, 0.0
-    timings = {"horizons_s": 0.0, "shadows_s": 0.0, "bounces_s": 0.0, "update_s": 0.0}
+    timings = {"horizons_s": 0.0, "radiation_s": 0.0, "update_s": 0.0}
     horizons, absorbed, melt = None, np.zeros_like(h), np.zeros_like(h)
     for day in range(s.days):
         sun = sunpath.daily_sun_positions(s.latitude, s.start_day_of_year + day, s.sun_positions_per_day)
@@ -202,38 +272,28 @@ def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np
             t0 = time.perf_counter()
             horizons = irradiance.compute_horizons(h, spacing, s.azimuths, rotation=rng.uniform(0, 2 * np.pi))
             t1 = time.perf_counter()
-            normals = irradiance.unit_normals(h, spacing)
-            primary = np.zeros_like(h)  # direct + sky energy per true area [J m-2]
-            flux_seconds = 0.0  # time integral of horizontal incident flux / reference [s]
-            for j in chunk:
-                elevation = float(np.arcsin(sun.vectors[j, 2]))
-                s_b, s_d = s.sky.direct_normal(elevation), s.sky.diffuse_horizontal(elevation)
-                visible = irradiance.sun_visibility(h, spacing, sun.vectors[j])
-                primary += sun.durations[j] * (s_b * np.clip(normals @ sun.vectors[j], 0, None) * visible
-                                               + s_d * horizons.sky_view)
-                flux_seconds += sun.durations[j] * (s_b * np.sin(elevation) + s_d) / s.scattered_reference_flux
+            direct_h, diffuse, absorbed, flux_seconds = _period_energy(h, spacing, s, sun, chunk, horizons)
             t2 = time.perf_counter()
-            terrain = irradiance.bounce_terrain_light(primary, s.albedo, spacing, horizons, s.bounces)
-            absorbed = (1.0 - s.albedo) * (primary + terrain)
-            t3 = time.perf_counter()
-            melt = (melt_fraction(horizons.sky_view if s.switch_proxy == "sky_view" else horizons.openness, s.switch_centre, s.switch_width)
-                    if s.melt_enabled else np.zeros_like(h))
-            recession = s.ablation_efficiency * absorbed * inverse_latent_heat(melt) / s.density  # along normal [m]
+            exposure = horizons.sky_view if s.switch_proxy == "sky_view" else horizons.openness
+            melt = melt_fraction(exposure, s.switch_centre, s.switch_width) if s.melt_enabled else np.zeros_like(h)
+            lowering_per_energy = s.ablation_efficiency * inverse_latent_heat(melt) / s.density  # [m3 J-1]
             h_before = h.copy()
             factor, clamped = godunov_slope_factor(h, spacing, s.max_slope_deg)
-            substeps = max(1, int(np.ceil(float(np.max(recession * factor)) / (s.cfl * spacing))))
-            for _ in range(substeps):
-                factor, clamped = godunov_slope_factor(h, spacing, s.max_slope_deg)
-                h -= recession / substeps * factor
+            lowering = lowering_per_energy * (direct_h + diffuse * factor)
+            substeps = max(1, int(np.ceil(float(np.max(lowering)) / (s.cfl * spacing))))
+            for step in range(substeps):
+                if step:
+                    factor, clamped = godunov_slope_factor(h, spacing, s.max_slope_deg)
+                    lowering = lowering_per_energy * (direct_h + diffuse * factor)
+                h -= lowering / substeps
                 clamp_sum, clamp_count = clamp_sum + clamped, clamp_count + 1
-            daylight = float(sun.durations[chunk].sum())
-            h = spectral_linear_step(h, spacing, daylight, s.scattered_coefficient * flux_seconds / max(daylight, 1e-9),
-                                     s.diffusivity, s.hyperdiffusivity)
+            # Linear terms run on flux time, like A_B, so the selected band stays lambda* = 4 pi D / A_B.
+            h = spectral_linear_step(h, spacing, flux_seconds, s.scattered_coefficient, s.diffusivity, s.hyperdiffusivity)
             irradiance.check_height_field(h, f"height field after day {day + 1}")
             change = h - h_before
             max_change = max(max_change, float(change.max() - change.min()))
-            t4 = time.perf_counter()
-            for key, dt in zip(timings, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+            t3 = time.perf_counter()
+            for key, dt in zip(timings, (t1 - t0, t2 - t1, t3 - t2)):
                 timings[key] += dt
         relief.append(float(h.std()))
         if (day + 1) % snapshot_every == 0 or day + 1 == s.days:
@@ -261,5 +321,6 @@ def settings_from_config(cfg) -> GrowthSettings:
         switch_proxy=cfg.switch_proxy, diffusivity=cfg.diffusivity, hyperdiffusivity=cfg.hyperdiffusivity,
         scattered_coefficient=cfg.scattered_light_coefficient,
         scattered_reference_flux=cfg.scattered_light_reference_flux, azimuths=cfg.azimuths,
-        bounces=cfg.bounces, max_slope_deg=cfg.max_slope_deg, cfl=cfg.cfl, snapshots=cfg.snapshots,
+        bounces=cfg.bounces, max_slope_deg=cfg.max_slope_deg, sky_loss=cfg.sky_loss, cfl=cfg.cfl,
+        snapshots=cfg.snapshots,
     )

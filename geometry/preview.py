@@ -141,7 +141,7 @@ def save_timelapse(path: Path, snapshots: np.ndarray, snapshot_days: np.ndarray,
             ax.set_ylabel("y, north [m]")
             fig.set_dpi(dpi)
             fig.canvas.draw()
-            image = np.asarray(fig.canvas.buffer_rgba())[:, :, :3]
+            image = np.array(fig.canvas.buffer_rgba())[:, :, :3]  # a copy: the canvas buffer is reused by the next draw
             image = image[: image.shape[0] // 2 * 2, : image.shape[1] // 2 * 2]
             frames.append(image)
         stream.width, stream.height = frames[0].shape[1], frames[0].shape[0]

@@ -39,30 +39,49 @@ class GeometryConfig(StrictModel):
 
     # Ablation model
     ablation_efficiency: float = Field(
-        0.5, gt=0, le=1, description="Fraction eps of absorbed shortwave spent on ablation [-]."
+        1.0, gt=0, le=1,
+        description="Fraction eps of the absorbed shortwave left after geometry.sky_loss that is spent on ablation; "
+                    "with sky_loss = 0 it alone stands for the longwave and turbulent losses (~0.5) [-].",
+    )
+    sky_loss: float = Field(
+        90.0, ge=0, le=500,
+        description="Net longwave + turbulent loss of a facet open to the sky, averaged over 24 h. Each facet loses it "
+                    "times its sky view factor and each day only the absorbed shortwave above that ablates (on flat "
+                    "Tapado ice this leaves ~46 % of the absorbed shortwave); 0 folds the loss into "
+                    "ablation_efficiency [W m-2].",
     )
     melt_enabled: bool = Field(True, description="Lliboutry switch on; false = sublimation only (cold lab, planets) [-].")
     switch_proxy: Literal["sky_view", "openness"] = Field(
-        "sky_view", description="Sheltering proxy of the switch: the facet's sky view factor, or the sky view of a level receiver [-]."
+        "openness", description="Sheltering proxy of the switch: the sky view of a level receiver at the point (falls "
+                                "toward trough floors), or the facet's own sky view factor (also low on exposed steep "
+                                "walls and crests, which then melt as if sheltered) [-]."
     )
-    switch_centre: float = Field(0.7, gt=0, lt=1, description="Switch centre V_c: below it cells start to melt [-].")
-    switch_width: float = Field(0.2, gt=0, le=1, description="Switch width dV: melt is complete at V_c - dV [-].")
-    diffusivity: float = Field(2e-9, ge=0, le=1e-5, description="Diffusive regulariser D [m2 s-1].")
+    switch_centre: float = Field(0.85, gt=0, lt=1, description="Switch centre V_c: below it cells start to melt [-].")
+    switch_width: float = Field(0.3, gt=0, le=1, description="Switch width dV: melt is complete at V_c - dV [-].")
+    diffusivity: float = Field(
+        0.0, ge=0, le=1e-5,
+        description="Diffusive regulariser D; with A_B it selects lambda* = 4 pi D / A_B. Runs on flux time like A_B. "
+                    "Without A_B it only smooths, and at metre-field grids it rounds the 2-4 cell blade walls [m2 s-1].",
+    )
     hyperdiffusivity: float = Field(0.0, ge=0, le=1e-8, description="Fourth-order regulariser K [m4 s-1].")
     scattered_light_coefficient: float = Field(
         0.0, ge=0, le=1e-5,
         description="Betterton kernel coefficient A_B = 0.5 F/(rho L) at the reference flux; 0 = off [m s-1].",
     )
     scattered_light_reference_flux: float = Field(
-        1000.0, gt=0, description="Horizontal flux F at which A_B applies; it scales with the actual flux [W m-2]."
+        1000.0, gt=0,
+        description="Horizontal flux F at which A_B and D apply; both run on flux time (the time integral of the "
+                    "actual horizontal flux over F), so lambda* = 4 pi D / A_B at any sun [W m-2].",
     )
     max_slope_deg: float = Field(85.0, gt=45, lt=90, description="Slope clamp of the height field (overhang limit) [deg].")
 
     # Grid, initial state and numerics
     grid_cells: int = Field(128, ge=16, le=2048, description="Cells per side of the periodic square grid N [-].")
     domain_size: float = Field(8.0, gt=0, le=1e4, description="Side L of the periodic domain [m].")
-    initial_roughness_rms: float = Field(0.05, gt=0, description="RMS height of the seeded noise [m].")
-    initial_wavelength: float = Field(0.5, gt=0, description="Wavelength at the centre of the seeded noise band [m].")
+    initial_roughness_rms: float = Field(
+        0.067, gt=0, description="RMS height of the seeded noise, 1-5 % of the mature spacing (penitentes.md 3.12) [m]."
+    )
+    initial_wavelength: float = Field(0.67, gt=0, description="Wavelength at the centre of the seeded noise band [m].")
     azimuths: int = Field(16, ge=8, le=64, description="Horizon azimuths M [-].")
     bounces: int = Field(2, ge=0, le=8, description="Terrain-reflection (radiosity) bounces n_b [-].")
     cfl: float = Field(0.5, gt=0, le=1, description="Hamilton-Jacobi CFL number of the recession sub-steps [-].")
