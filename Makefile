@@ -69,6 +69,7 @@ sanitize: $(STAMPS)/venv ## Build the core with -fsanitize=address,undefined; ru
 bench: setup ## Benchmarks: ray engine throughput, geometry stage against grid size
 	$(PY) benchmarks/bench_rays.py
 	@if [ -f benchmarks/bench_geometry.py ]; then $(PY) benchmarks/bench_geometry.py; fi
+	$(PY) benchmarks/bench_ptpb.py
 
 sweep: setup ## Run a config sweep (default configs/sweeps/default.yaml on 2 cores; SWEEP=..., CORES=...)
 	$(PY) -m pipeline sweep $(or $(SWEEP),configs/sweeps/default.yaml) --cores $(or $(CORES),2)

@@ -1,17 +1,48 @@
-// Uniform grid and Embree user-geometry BVH over diced, R-inflated beam pieces.
+// Uniform grid and 4-wide BVH (built by Embree's BVH builder, traversed here) over diced,
+// R-inflated beam pieces.
+//
+// Both run the gather's exact closest-approach test (ptpb.md §4) themselves, in a division-free
+// form that is a hair looser than the gather's, and report each beam at most once: from the piece
+// that owns the beam parameter s_b of the closest approach (BVH), or from the grid cell that owns
+// the query parameter t_b (grid). The gather's own test then decides exactly as before, so images
+// do not change, while candidates that could never pass (box corners, repeated pieces) cost neither
+// a push nor a place in the gather's sort. Near-parallel candidates are always reported, so that the
+// gather still counts them in its parallel statistic.
+//
+// Why not Embree user geometry: its per-primitive callback and the pieces it reads by index cost
+// more than the traversal itself; here the leaves hold their pieces inline and the node test is one
+// 4-wide slab test.
 #include "ptpb/beam_accel.hpp"
 
 #include <embree3/rtcore.h>
+#include <embree3/rtcore_builder.h>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
+#include "ptpb/beam_geometry.hpp"
 #include "ptpb/parallel.hpp"
 
 namespace ptpb {
 namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Candidates with sin^2 below this reach the gather untested: its parallel guard (default 1e-5)
+// counts them there.
+constexpr double kParallelKeepSin2 = 1e-4;
+// Boxes grow by this fraction of the scene scale beyond R: it covers the float rounding of the
+// boxes, of Embree's float ray and of the piece boundaries, so a pair within R is never missed.
+constexpr double kBoxMargin = 4e-6;
+// The exact test accepts t and s this fraction of the scene scale outside their ranges, and u up to
+// R (1 + 1e-9): far above rounding, so the gather never sees fewer pairs than its own test accepts.
+constexpr double kRangeSlack = 1e-9;
 
 struct Box {
   Vec3d lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
@@ -20,16 +51,20 @@ struct Box {
   }
 };
 
-Box beams_bounds(const std::vector<Beam>& beams, double radius) {
+Box beams_bounds(const std::vector<Beam>& beams) {
   Box b;
   for (const Beam& beam : beams) {
     b.expand(beam.origin);
     b.expand(beam.origin + beam.direction * beam.length);
   }
-  const Vec3d r{radius, radius, radius};
-  b.lo = b.lo - r;
-  b.hi = b.hi + r;
   return b;
+}
+
+// A length that bounds every coordinate and distance of the beams' box.
+double scene_scale(const Box& b) {
+  double s = max_component(b.hi - b.lo);
+  for (int a = 0; a < 3; ++a) s = std::max(s, std::max(std::fabs(b.lo[a]), std::fabs(b.hi[a])));
+  return std::max(s, 1e-300);
 }
 
 // Segment–box slab test on [t0, t1]; narrows t0/t1 to the overlap.
@@ -49,7 +84,61 @@ bool clip_to_box(const Vec3d& o, const Vec3d& d, const Vec3d& lo, const Vec3d& h
   return true;
 }
 
+// One query segment as the exact test reads it: accepted t range and R^2, slack included.
+struct PairQuery {
+  Vec3d origin, direction;
+  double t_lo, t_hi, radius2;
+};
+
+PairQuery make_pair_query(const Vec3d& o, const Vec3d& d, double t_max, double radius, double slack) {
+  const double r = radius * (1.0 + 1e-9);
+  return {o, d, -slack, t_max + slack, r * r};
+}
+
+// The gather's test of §4 without divisions: near-parallel, or t_b in range and u_b < R. On true,
+// `n` holds the numerators for the caller's ownership test on s_b or t_b.
+bool pair_candidate(const PairQuery& q, const Vec3d& xb, const Vec3d& wb, ApproachNumerators& n, bool& parallel) {
+  n = closest_approach_numerators(q.origin, q.direction, xb, wb);
+  parallel = n.sin2 < kParallelKeepSin2;
+  if (parallel) return true;
+  return n.t_num >= q.t_lo * n.sin2 && n.t_num <= q.t_hi * n.sin2 && n.w_cross * n.w_cross < q.radius2 * n.sin2;
+}
+
+// Sorts out[from, end) ascending. The gather sorts its candidates again (the canonical order of
+// ptpb.md §9); a sorted input makes that sort cheap and the gather's beam reads sequential, and an
+// LSD radix sort over the bits the beam indices use costs less than a comparison sort.
+void sort_candidates(std::vector<std::uint32_t>& out, std::size_t from) {
+  const std::size_t n = out.size() - from;
+  if (n < 2) return;
+  std::uint32_t* a = out.data() + from;
+  if (n <= 32) {
+    for (std::size_t i = 1; i < n; ++i)
+      for (std::size_t j = i; j > 0 && a[j - 1] > a[j]; --j) std::swap(a[j - 1], a[j]);
+    return;
+  }
+  std::uint32_t used_bits = 0;
+  for (std::size_t i = 0; i < n; ++i) used_bits |= a[i];
+  thread_local std::vector<std::uint32_t> scratch;
+  scratch.resize(n);
+  std::uint32_t* src = a;
+  std::uint32_t* dst = scratch.data();
+  for (int shift = 0; shift < 32 && (used_bits >> shift) != 0; shift += 8) {
+    std::size_t count[257] = {};
+    for (std::size_t i = 0; i < n; ++i) ++count[((src[i] >> shift) & 0xFFu) + 1];
+    for (int b = 0; b < 256; ++b) count[b + 1] += count[b];
+    for (std::size_t i = 0; i < n; ++i) dst[count[(src[i] >> shift) & 0xFFu]++] = src[i];
+    std::swap(src, dst);
+  }
+  if (src != a) std::copy(src, src + n, a);
+}
+
 constexpr std::size_t kBuildChunk = 2048;
+
+// The beam's line in double precision, as the exact test reads it.
+struct BeamLine {
+  Vec3d origin, direction;
+  double length;
+};
 
 class BeamGrid final : public BeamAccel {
  public:
@@ -61,12 +150,19 @@ class BeamGrid final : public BeamAccel {
     radius_ = radius;
     offsets_.clear();
     refs_.clear();
+    lines_.clear();
     if (beams.empty()) return;
-    const Box box = beams_bounds(beams, radius);
-    lo_ = box.lo;
-    const Vec3d extent = box.hi - box.lo;
+    const Box bounds = beams_bounds(beams);
+    const double scale = scene_scale(bounds);
+    slack_ = kRangeSlack * scale;
+    const double inflate = radius + kBoxMargin * scale;
+    const Vec3d r{inflate, inflate, inflate};
+    lo_ = bounds.lo - r;
+    const Vec3d extent = bounds.hi + r - lo_;
     cell_ = max_component(extent) / resolution_;
     for (int a = 0; a < 3; ++a) dims_[a] = std::clamp(static_cast<int>(std::ceil(extent[a] / cell_)), 1, resolution_);
+    lines_.resize(beams.size());
+    for (std::size_t i = 0; i < beams.size(); ++i) lines_[i] = {beams[i].origin, beams[i].direction, beams[i].length};
     const std::size_t cell_count = std::size_t(dims_[0]) * dims_[1] * dims_[2];
     const std::size_t chunks = (beams.size() + kBuildChunk - 1) / kBuildChunk;
     std::vector<std::vector<std::uint64_t>> chunk_refs(chunks);  // (cell << 32) | beam
@@ -84,8 +180,8 @@ class BeamGrid final : public BeamAccel {
             const Vec3d p1 = b.origin + b.direction * (b.length * (k + 1) / pieces);
             int i0[3], i1[3];
             for (int a = 0; a < 3; ++a) {
-              i0[a] = cell_index(std::min(p0[a], p1[a]) - radius, a);
-              i1[a] = cell_index(std::max(p0[a], p1[a]) + radius, a);
+              i0[a] = cell_index(std::min(p0[a], p1[a]) - inflate, a);
+              i1[a] = cell_index(std::max(p0[a], p1[a]) + inflate, a);
             }
             for (int z = i0[2]; z <= i1[2]; ++z)
               for (int y = i0[1]; y <= i1[1]; ++y)
@@ -109,8 +205,11 @@ class BeamGrid final : public BeamAccel {
       for (std::uint64_t r : refs) refs_[cursor[r >> 32]++] = static_cast<std::uint32_t>(r);
   }
 
+  // 3D-DDA along the query; a beam is reported by the cell whose t-range holds its t_b (SmallUPBP).
   void query(const Vec3d& o, const Vec3d& d, double t_max, std::vector<std::uint32_t>& out) const override {
     if (refs_.empty()) return;
+    const PairQuery q = make_pair_query(o, d, t_max, radius_, slack_);
+    const std::size_t first = out.size();
     double t0 = 0.0, t1 = t_max;
     const Vec3d hi = lo_ + Vec3d{dims_[0] * cell_, dims_[1] * cell_, dims_[2] * cell_};
     if (!clip_to_box(o, d, lo_, hi, t0, t1)) return;
@@ -125,18 +224,32 @@ class BeamGrid final : public BeamAccel {
         t_next[a] = t0 + (boundary - p[a]) / d[a];
         t_delta[a] = cell_ / std::fabs(d[a]);
       } else {
-        t_next[a] = t_delta[a] = std::numeric_limits<double>::infinity();
+        t_next[a] = t_delta[a] = kInf;
       }
     }
+    double t_enter = -kInf;  // the first and last cells own everything before and after them
     for (;;) {
-      const std::size_t cell = (std::size_t(idx[2]) * dims_[1] + idx[1]) * dims_[0] + idx[0];
-      out.insert(out.end(), refs_.begin() + offsets_[cell], refs_.begin() + offsets_[cell + 1]);
       const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
-      if (t_next[a] > t1) break;
+      const bool last = t_next[a] > t1 || idx[a] + step[a] < 0 || idx[a] + step[a] >= dims_[a];
+      const double t_exit = last ? kInf : t_next[a];
+      const std::size_t cell = (std::size_t(idx[2]) * dims_[1] + idx[1]) * dims_[0] + idx[0];
+      for (std::uint32_t r = offsets_[cell]; r < offsets_[cell + 1]; ++r) {
+        const std::uint32_t bi = refs_[r];
+        const BeamLine& line = lines_[bi];
+        ApproachNumerators n;
+        bool parallel;
+        if (!pair_candidate(q, line.origin, line.direction, n, parallel)) continue;
+        if (!parallel && !(n.t_num >= t_enter * n.sin2 && n.t_num < t_exit * n.sin2 && n.s_num >= -slack_ * n.sin2 &&
+                           n.s_num <= (line.length + slack_) * n.sin2))
+          continue;
+        out.push_back(bi);
+      }
+      if (last) break;
+      t_enter = t_exit;
       idx[a] += step[a];
-      if (idx[a] < 0 || idx[a] >= dims_[a]) break;
       t_next[a] += t_delta[a];
     }
+    sort_candidates(out, first);
   }
 
   std::uint64_t references() const override { return refs_.size(); }
@@ -147,125 +260,250 @@ class BeamGrid final : public BeamAccel {
     return std::clamp(static_cast<int>(std::floor((x - lo_[axis]) / cell_)), 0, dims_[axis] - 1);
   }
   int resolution_;
-  double radius_ = 0.0, cell_ = 1.0;
+  double radius_ = 0.0, cell_ = 1.0, slack_ = 0.0;
   Vec3d lo_{};
   int dims_[3] = {1, 1, 1};
   std::vector<std::uint32_t> offsets_, refs_;
+  std::vector<BeamLine> lines_;
 };
 
-struct Piece {
+// One diced piece: its beam's line (shared by all its pieces) and the half-open share
+// [s_begin, s_end) of the beam parameter it owns. One cache line; leaves store their pieces inline.
+struct alignas(64) Piece {
+  Vec3d origin, direction;
+  float s_begin, s_end;
   std::uint32_t beam;
-  float lo[3], hi[3];
+  std::uint32_t last;  // 1 on the last piece of a leaf
 };
 
-struct BvhQueryContext {
-  RTCIntersectContext context;  // first member: Embree hands this pointer back to the callback
-  const std::vector<Piece>* pieces;
-  std::vector<std::uint32_t>* out;
+// A 4-wide BVH node: child boxes in float, structure of arrays. A child pointer with bit 0 set is a
+// leaf (its Piece array); a null child has an empty box.
+struct alignas(64) Node4 {
+  float box[6][4];  // rows: lower x, y, z, then upper x, y, z; columns: children
+  std::uintptr_t child[4];
 };
+constexpr std::uintptr_t kLeafTag = 1;
 
-void piece_bounds(const RTCBoundsFunctionArguments* args) {
-  const auto& p = (*static_cast<const std::vector<Piece>*>(args->geometryUserPtr))[args->primID];
-  RTCBounds* b = args->bounds_o;
-  b->lower_x = p.lo[0]; b->lower_y = p.lo[1]; b->lower_z = p.lo[2];
-  b->upper_x = p.hi[0]; b->upper_y = p.hi[1]; b->upper_z = p.hi[2];
+void* create_node(RTCThreadLocalAllocator alloc, unsigned int /*children*/, void* /*user*/) {
+  auto* node = static_cast<Node4*>(rtcThreadLocalAlloc(alloc, sizeof(Node4), alignof(Node4)));
+  for (int i = 0; i < 4; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      node->box[a][i] = std::numeric_limits<float>::infinity();
+      node->box[3 + a][i] = -std::numeric_limits<float>::infinity();
+    }
+    node->child[i] = 0;
+  }
+  return node;
 }
 
-// Records the piece's beam if the ray segment crosses its box, and never reports a hit, so
-// traversal visits every overlapping piece (all-hits query).
-void piece_intersect(const RTCIntersectFunctionNArguments* args) {
-  if (!args->valid[0]) return;
-  auto* ctx = reinterpret_cast<BvhQueryContext*>(args->context);
-  const Piece& p = (*ctx->pieces)[args->primID];
-  const RTCRay& ray = reinterpret_cast<RTCRayHit*>(args->rayhit)->ray;
-  double t0 = ray.tnear, t1 = ray.tfar;
-  if (clip_to_box({ray.org_x, ray.org_y, ray.org_z}, {ray.dir_x, ray.dir_y, ray.dir_z},
-                  {p.lo[0], p.lo[1], p.lo[2]}, {p.hi[0], p.hi[1], p.hi[2]}, t0, t1)) {
-    ctx->out->push_back(p.beam);
+void set_node_children(void* node_ptr, void** children, unsigned int count, void* /*user*/) {
+  auto* node = static_cast<Node4*>(node_ptr);
+  for (unsigned i = 0; i < count; ++i) node->child[i] = reinterpret_cast<std::uintptr_t>(children[i]);
+}
+
+void set_node_bounds(void* node_ptr, const RTCBounds** bounds, unsigned int count, void* /*user*/) {
+  auto* node = static_cast<Node4*>(node_ptr);
+  for (unsigned i = 0; i < count; ++i) {
+    node->box[0][i] = bounds[i]->lower_x; node->box[1][i] = bounds[i]->lower_y; node->box[2][i] = bounds[i]->lower_z;
+    node->box[3][i] = bounds[i]->upper_x; node->box[4][i] = bounds[i]->upper_y; node->box[5][i] = bounds[i]->upper_z;
   }
+}
+
+// Piece k of n of beam `b`: the pieces split [0, L] at float boundaries (shared by neighbours, so every
+// s_b has exactly one owner), and the first and last run past 0 and L by the slack.
+Piece make_piece(const Beam& b, std::uint32_t beam, int k, int n, double slack) {
+  const auto boundary = [&](int j) {
+    if (j == 0) return std::nextafter(static_cast<float>(-slack), -1e30f);
+    if (j == n) return std::nextafter(static_cast<float>(b.length + slack), 1e30f);
+    return static_cast<float>(b.length * j / n);
+  };
+  return Piece{b.origin, b.direction, boundary(k), boundary(k + 1), beam, 0};
+}
+
+// The box of piece k of n, inflated by `inflate` and rounded outwards so that the float box still
+// contains the double capsule.
+RTCBuildPrimitive piece_box(const Beam& b, std::uint32_t beam, int k, int n, double inflate) {
+  const Vec3d p0 = b.origin + b.direction * (b.length * k / n);
+  const Vec3d p1 = b.origin + b.direction * (b.length * (k + 1) / n);
+  const auto lo = [&](int a) { return std::nextafter(static_cast<float>(std::min(p0[a], p1[a]) - inflate), -1e30f); };
+  const auto hi = [&](int a) { return std::nextafter(static_cast<float>(std::max(p0[a], p1[a]) + inflate), 1e30f); };
+  RTCBuildPrimitive prim;
+  prim.lower_x = lo(0); prim.lower_y = lo(1); prim.lower_z = lo(2);
+  prim.upper_x = hi(0); prim.upper_y = hi(1); prim.upper_z = hi(2);
+  prim.geomID = beam;                                           // the beam ...
+  prim.primID = static_cast<unsigned>(k) | (static_cast<unsigned>(n) << 16);  // ... and which of its pieces
+  return prim;
+}
+
+struct LeafSource {
+  const std::vector<Beam>* beams;
+  double slack;
+};
+
+// Writes the leaf's pieces next to each other, so that a leaf is read in one sweep.
+void* create_leaf(RTCThreadLocalAllocator alloc, const RTCBuildPrimitive* prims, size_t count, void* user) {
+  const LeafSource& src = *static_cast<const LeafSource*>(user);
+  auto* leaf = static_cast<Piece*>(rtcThreadLocalAlloc(alloc, count * sizeof(Piece), alignof(Piece)));
+  for (size_t i = 0; i < count; ++i) {
+    const std::uint32_t beam = prims[i].geomID;
+    leaf[i] = make_piece((*src.beams)[beam], beam, int(prims[i].primID & 0xFFFFu), int(prims[i].primID >> 16), src.slack);
+    leaf[i].last = i + 1 == count;
+  }
+  return reinterpret_cast<void*>(reinterpret_cast<std::uintptr_t>(leaf) | kLeafTag);
 }
 
 class BeamBvh final : public BeamAccel {
  public:
-  explicit BeamBvh(double dice_length) : dice_length_(dice_length) {
-    device_ = rtcNewDevice("verbose=0");
-    if (!device_) throw std::runtime_error("Embree device creation failed for the beam BVH");
-  }
+  explicit BeamBvh(double dice_length) : dice_length_(dice_length) {}
   ~BeamBvh() override {
-    if (scene_) rtcReleaseScene(scene_);
-    rtcReleaseDevice(device_);
+    if (bvh_) rtcReleaseBVH(bvh_);
+    if (device_) rtcReleaseDevice(device_);
   }
 
   void build(const std::vector<Beam>& beams, double radius, int threads) override {
     radius_ = radius;
-    pieces_.clear();
-    if (scene_) { rtcReleaseScene(scene_); scene_ = nullptr; }
+    root_ = 0;
+    piece_count_ = 0;
+    if (bvh_) { rtcReleaseBVH(bvh_); bvh_ = nullptr; }
     if (beams.empty()) return;
-    const Box box = beams_bounds(beams, radius);
-    const double dice = dice_length_ > 0 ? dice_length_ : std::max(4.0 * radius, max_component(box.hi - box.lo) / 32.0);
+    if (beams.size() > std::numeric_limits<unsigned>::max()) throw std::invalid_argument("too many beams for the BVH");
+    use_device(resolve_thread_count(threads));
+    const Box bounds = beams_bounds(beams);
+    const double scale = scene_scale(bounds);
+    slack_ = kRangeSlack * scale;
+    const double inflate = radius + kBoxMargin * scale;
+    const double dice = dice_length_ > 0 ? dice_length_ : std::max(4.0 * radius, max_component(bounds.hi - bounds.lo) / 32.0);
     const std::size_t chunks = (beams.size() + kBuildChunk - 1) / kBuildChunk;
-    std::vector<std::vector<Piece>> chunk_pieces(chunks);
+    std::vector<std::size_t> chunk_start(chunks + 1, 0);  // pieces per chunk, then their prefix sum
+    std::vector<int> piece_count(beams.size());
+    for (std::size_t bi = 0; bi < beams.size(); ++bi) {
+      piece_count[bi] = std::clamp(static_cast<int>(std::ceil(beams[bi].length / dice)), 1, 256);
+      chunk_start[bi / kBuildChunk + 1] += piece_count[bi];
+    }
+    for (std::size_t c = 0; c < chunks; ++c) chunk_start[c + 1] += chunk_start[c];
+    piece_count_ = chunk_start[chunks];
+    prims_.resize(piece_count_);
     parallel_for_chunks(chunks, 1, threads, [&](std::size_t c0, std::size_t c1) {
       for (std::size_t c = c0; c < c1; ++c) {
+        std::size_t slot = chunk_start[c];
         const std::size_t b_end = std::min(beams.size(), (c + 1) * kBuildChunk);
-        for (std::size_t bi = c * kBuildChunk; bi < b_end; ++bi) {
-          const Beam& b = beams[bi];
-          const int n = std::clamp(static_cast<int>(std::ceil(b.length / dice)), 1, 256);
-          for (int k = 0; k < n; ++k) {
-            const Vec3d p0 = b.origin + b.direction * (b.length * k / n);
-            const Vec3d p1 = b.origin + b.direction * (b.length * (k + 1) / n);
-            Piece p;
-            p.beam = static_cast<std::uint32_t>(bi);
-            for (int a = 0; a < 3; ++a) {
-              // Rounded outwards so the float box still contains the double capsule.
-              p.lo[a] = std::nextafter(static_cast<float>(std::min(p0[a], p1[a]) - radius), -1e30f);
-              p.hi[a] = std::nextafter(static_cast<float>(std::max(p0[a], p1[a]) + radius), 1e30f);
-            }
-            chunk_pieces[c].push_back(p);
-          }
-        }
+        for (std::size_t bi = c * kBuildChunk; bi < b_end; ++bi)
+          for (int k = 0; k < piece_count[bi]; ++k)
+            prims_[slot++] = piece_box(beams[bi], static_cast<std::uint32_t>(bi), k, piece_count[bi], inflate);
       }
     });
-    for (auto& v : chunk_pieces) pieces_.insert(pieces_.end(), v.begin(), v.end());
-    scene_ = rtcNewScene(device_);
-    rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_LOW);
-    RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_USER);
-    rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(pieces_.size()));
-    rtcSetGeometryUserData(geom, &pieces_);
-    rtcSetGeometryBoundsFunction(geom, piece_bounds, &pieces_);
-    rtcSetGeometryIntersectFunction(geom, piece_intersect);
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(scene_, geom);
-    rtcReleaseGeometry(geom);
-    rtcCommitScene(scene_);
-    if (rtcGetDeviceError(device_) != RTC_ERROR_NONE) throw std::runtime_error("Embree failed to build the beam BVH");
+    LeafSource source{&beams, slack_};
+    bvh_ = rtcNewBVH(device_);
+    RTCBuildArguments args = rtcDefaultBuildArguments();
+    args.buildQuality = RTC_BUILD_QUALITY_MEDIUM;
+    args.maxBranchingFactor = 4;
+    args.maxLeafSize = kMaxLeafPieces;
+    args.traversalCost = 1.0f;
+    args.intersectionCost = kPieceTestCost;
+    args.bvh = bvh_;
+    args.primitives = prims_.data();
+    args.primitiveCount = prims_.size();
+    args.primitiveArrayCapacity = prims_.size();
+    args.createNode = create_node;
+    args.setNodeChildren = set_node_children;
+    args.setNodeBounds = set_node_bounds;
+    args.createLeaf = create_leaf;
+    args.userPtr = &source;
+    root_ = reinterpret_cast<std::uintptr_t>(rtcBuildBVH(&args));
+    if (!root_ || rtcGetDeviceError(device_) != RTC_ERROR_NONE)
+      throw std::runtime_error("Embree failed to build the beam BVH");
   }
 
   void query(const Vec3d& o, const Vec3d& d, double t_max, std::vector<std::uint32_t>& out) const override {
-    if (!scene_) return;
-    BvhQueryContext ctx;
-    rtcInitIntersectContext(&ctx.context);
-    ctx.pieces = &pieces_;
-    ctx.out = &out;
-    RTCRayHit rh{};
-    rh.ray.org_x = float(o.x); rh.ray.org_y = float(o.y); rh.ray.org_z = float(o.z);
-    rh.ray.dir_x = float(d.x); rh.ray.dir_y = float(d.y); rh.ray.dir_z = float(d.z);
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = std::nextafter(float(t_max), 1e30f);
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene_, &ctx.context, &rh);
+    if (!root_) return;
+    const PairQuery q = make_pair_query(o, d, t_max, radius_, slack_);
+    // The float ray of the box tests; the margin of the boxes covers its rounding.
+    float org[3], inv[3];
+    int near_row[3], far_row[3];  // the box rows of each axis's entry and exit planes
+    for (int a = 0; a < 3; ++a) {
+      org[a] = static_cast<float>(o[a]);
+      const double da = std::fabs(d[a]) < 1e-30 ? std::copysign(1e-30, d[a]) : d[a];
+      inv[a] = static_cast<float>(1.0 / da);
+      near_row[a] = inv[a] < 0 ? 3 + a : a;
+      far_row[a] = inv[a] < 0 ? a : 3 + a;
+    }
+    const float t_far = std::nextafter(static_cast<float>(t_max + slack_), 1e30f);
+#if defined(__SSE2__)
+    const __m128 org4[3] = {_mm_set1_ps(org[0]), _mm_set1_ps(org[1]), _mm_set1_ps(org[2])};
+    const __m128 inv4[3] = {_mm_set1_ps(inv[0]), _mm_set1_ps(inv[1]), _mm_set1_ps(inv[2])};
+    const __m128 far4 = _mm_set1_ps(t_far);
+#endif
+    const std::size_t first = out.size();
+    std::uintptr_t stack[kStackSize];
+    int top = 0;
+    stack[top++] = root_;
+    while (top > 0) {
+      const std::uintptr_t item = stack[--top];
+      if (item & kLeafTag) {
+        for (const Piece* p = reinterpret_cast<const Piece*>(item & ~kLeafTag);; ++p) {
+          ApproachNumerators n;
+          bool parallel;
+          if (pair_candidate(q, p->origin, p->direction, n, parallel) &&
+              (parallel || (n.s_num >= double(p->s_begin) * n.sin2 && n.s_num < double(p->s_end) * n.sin2)))
+            out.push_back(p->beam);
+          if (p->last) break;
+        }
+        continue;
+      }
+      const Node4& node = *reinterpret_cast<const Node4*>(item);
+      // Slab test of the four child boxes at once.
+      const float *nx = node.box[near_row[0]], *ny = node.box[near_row[1]], *nz = node.box[near_row[2]];
+      const float *fx = node.box[far_row[0]], *fy = node.box[far_row[1]], *fz = node.box[far_row[2]];
+#if defined(__SSE2__)
+      const __m128 t0 = _mm_max_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(nx), org4[0]), inv4[0]),
+                                              _mm_mul_ps(_mm_sub_ps(_mm_load_ps(ny), org4[1]), inv4[1])),
+                                   _mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(nz), org4[2]), inv4[2]), _mm_setzero_ps()));
+      const __m128 t1 = _mm_min_ps(_mm_min_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(fx), org4[0]), inv4[0]),
+                                              _mm_mul_ps(_mm_sub_ps(_mm_load_ps(fy), org4[1]), inv4[1])),
+                                   _mm_min_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(fz), org4[2]), inv4[2]), far4));
+      const int hits = _mm_movemask_ps(_mm_cmple_ps(t0, t1));
+#else
+      int hits = 0;
+      for (int i = 0; i < 4; ++i) {
+        const float t0 = std::max(std::max((nx[i] - org[0]) * inv[0], (ny[i] - org[1]) * inv[1]),
+                                  std::max((nz[i] - org[2]) * inv[2], 0.0f));
+        const float t1 = std::min(std::min((fx[i] - org[0]) * inv[0], (fy[i] - org[1]) * inv[1]),
+                                  std::min((fz[i] - org[2]) * inv[2], t_far));
+        hits |= int(t0 <= t1) << i;
+      }
+#endif
+      for (int i = 0; i < 4; ++i)
+        if ((hits >> i & 1) && node.child[i]) stack[top++] = node.child[i];
+    }
+    sort_candidates(out, first);
   }
 
-  std::uint64_t references() const override { return pieces_.size(); }
+  std::uint64_t references() const override { return piece_count_; }
   double radius() const override { return radius_; }
 
  private:
+  static constexpr unsigned kMaxLeafPieces = 4;
+  static constexpr float kPieceTestCost = 1.0f;   // exact pair test against one 4-wide node test (SAH)
+  static constexpr int kStackSize = 256;           // > 3 * maximal depth + 1
+
+  // Embree builds with its own thread pool: size it to the render's thread count.
+  void use_device(int threads) {
+    if (device_ && threads == device_threads_) return;
+    if (device_) rtcReleaseDevice(device_);
+    const std::string config = "verbose=0,threads=" + std::to_string(threads);
+    device_ = rtcNewDevice(config.c_str());
+    if (!device_) throw std::runtime_error("Embree device creation failed for the beam BVH");
+    device_threads_ = threads;
+  }
+
   double dice_length_;
-  double radius_ = 0.0;
+  double radius_ = 0.0, slack_ = 0.0;
   RTCDevice device_ = nullptr;
-  RTCScene scene_ = nullptr;
-  std::vector<Piece> pieces_;
+  int device_threads_ = 0;
+  RTCBVH bvh_ = nullptr;
+  std::uintptr_t root_ = 0;
+  std::size_t piece_count_ = 0;
+  std::vector<RTCBuildPrimitive> prims_;
 };
 
 }  // namespace

@@ -1,7 +1,7 @@
 // Acceleration structures for ray–beam queries (ptpb.md §8), rebuilt every iteration: a uniform
-// grid of diced beam pieces (SmallUPBP style) and an Embree BVH over the same pieces as user
-// geometry. Both return candidate beam indices; the caller sorts, deduplicates and runs the
-// exact closest-approach test.
+// grid of diced beam pieces (SmallUPBP style) and a 4-wide BVH over the same pieces (Embree's BVH
+// builder, our traversal). Both run the exact closest-approach test themselves and return each beam
+// that can pass it once; the caller still sorts, deduplicates and runs its own exact test.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -16,7 +16,10 @@ class BeamAccel {
   virtual ~BeamAccel() = default;
   // radius: the kernel radius R_i every box is inflated by.
   virtual void build(const std::vector<Beam>& beams, double radius, int threads) = 0;
-  // Appends (possibly repeated) indices of beams that may lie within R of origin + t dir, t in [0, t_max].
+  // Appends the indices of the beams whose closest approach to origin + t dir lies within R, with t in
+  // [0, t_max] and s in [0, length] (a hair looser than the exact test, never tighter), each once, and
+  // of the near-parallel beams (sin^2 < 1e-4), possibly repeated; the appended indices are sorted.
+  // Thread-safe.
   virtual void query(const Vec3d& origin, const Vec3d& direction, double t_max,
                      std::vector<std::uint32_t>& candidates) const = 0;
   virtual std::uint64_t references() const = 0;  // stored cell references or pieces

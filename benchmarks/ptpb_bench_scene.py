@@ -1,0 +1,134 @@
+"""The scene and the long reference render of benchmarks/bench_ptpb.py, cached on disk.
+
+- ``bench_scene(config)`` builds the scene folder (scene.json, ptpb_scene.json, meshes) once per
+  config: ``benchmarks/results/cache/scene-<hash of the scene section, the seed and the meshes>/``.
+  Mesh paths in the config are relative to the repository root.
+- ``reference(scene_dir, cfg)`` renders mitransient's transient_prbvolpath at ``reference.transient_spp``
+  as two independent halves (frames and its steady image) and keeps them in
+  ``cache/reference-<hash>.npz``, keyed by the scene files, the spp and the Mitsuba versions. Two halves
+  let the error of a render be corrected for the reference's own noise (``FrameError``).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.atomic import atomic_path
+from pipeline.config import config_hash
+from render.metrics import RELMSE_EPSILON
+
+REPO = Path(__file__).resolve().parents[1]
+RESULTS = REPO / "benchmarks" / "results"
+CACHE = RESULTS / "cache"
+REFERENCE_SEEDS = (1_000_000, 2_000_000)  # far from the seeds of the timed renders (0, 1, ...)
+
+log = logging.getLogger(__name__)
+
+
+def bench_scene(config) -> Path:
+    """The scene folder of ``config`` (the scene stage), built on the first call and cached by the
+    config's scene section, its seed and the mesh files it names."""
+    from render.scene_build import run_scene_stage
+
+    h = hashlib.sha256(config_hash(config, ["scene", "seed"]).encode())
+    for obj in config.scene.objects:
+        if obj.path:
+            h.update((REPO / obj.path).read_bytes())
+    folder = CACHE / f"scene-{h.hexdigest()[:16]}"
+    if (folder / "ptpb_scene.json").is_file():
+        return folder
+    print(f"building the benchmark scene in {folder} (once) ...", flush=True)
+    staging = folder.with_name(folder.name + ".partial")
+    shutil.rmtree(staging, ignore_errors=True)
+    run_scene_stage(config.scene, staging)
+    staging.rename(folder)
+    return folder
+
+
+def _scene_digest(scene_dir: Path) -> str:
+    h = hashlib.sha256()
+    for path in sorted([scene_dir / "scene.json", *(scene_dir / "meshes").glob("*.ply")]):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+@dataclass
+class Reference:
+    """The two halves of the reference (frames (T, H, W, 3), steady (H, W, 3)) and their render time."""
+
+    frames: tuple[np.ndarray, np.ndarray]
+    steady: tuple[np.ndarray, np.ndarray]
+    spp: int
+    seconds: float
+
+    def frame_error(self) -> "FrameError":
+        return FrameError(*self.frames)
+
+    def steady_error(self) -> "FrameError":
+        return FrameError(self.steady[0][None], self.steady[1][None])
+
+
+def reference(scene_dir: Path, cfg) -> Reference:
+    """mitransient at ``cfg.transient_spp`` (two halves), cached; ``cfg`` is the config's reference section."""
+    import mitsuba
+
+    from render.mitsuba_ref import render_transient, use_variant
+    from render.scene import Scene
+
+    use_variant(transient=True)
+    import mitransient
+
+    spp = cfg.transient_spp or cfg.spp
+    key_text = json.dumps({"scene": _scene_digest(scene_dir), "spp": spp, "seeds": REFERENCE_SEEDS,
+                           "mitsuba": mitsuba.__version__, "mitransient": mitransient.__version__})
+    path = CACHE / f"reference-{hashlib.sha256(key_text.encode()).hexdigest()[:16]}.npz"
+    if path.is_file():
+        with np.load(path) as z:
+            return Reference((z["frames_a"], z["frames_b"]), (z["steady_a"], z["steady_b"]), int(z["spp"]),
+                             float(z["seconds"]))
+    print(f"rendering the reference: mitransient at {spp} spp, cached in {path} (once; minutes) ...", flush=True)
+    scene = Scene.load(scene_dir / "scene.json")
+    halves = []
+    t0 = time.perf_counter()
+    for seed in REFERENCE_SEEDS:
+        frames, steady, _ = render_transient(scene, scene_dir, spp=spp // 2, spp_per_pass=cfg.spp_per_pass,
+                                             seed=seed, quiet=False)
+        halves.append((frames, steady))
+    seconds = time.perf_counter() - t0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, frames_a=halves[0][0], frames_b=halves[1][0], steady_a=halves[0][1],
+                     steady_b=halves[1][1], spp=spp, seconds=seconds, key=key_text)
+    return Reference((halves[0][0], halves[1][0]), (halves[0][1], halves[1][1]), spp, seconds)
+
+
+class FrameError:
+    """relMSE of renders against a two-half reference, with the reference's own noise taken out.
+
+    relMSE(x) = mean over frames, pixels and channels of (x - r)^2 / (r^2 + 1e-2) (render/metrics.py),
+    with r the mean of the halves a and b. Since x and r are independent, its expectation is the error
+    of x plus the reference's variance term, estimated as mean((a - b)^2 / (r^2 + 1e-2)) / 4; the
+    corrected figure subtracts it. Frames are equal in size, so the mean over all values is the mean of
+    the per-frame relMSEs."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray):
+        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+        self.reference = 0.5 * (a + b)
+        self.weight = 1.0 / (self.reference**2 + RELMSE_EPSILON)
+        self.reference_noise = float(np.mean((a - b) ** 2 * self.weight) / 4.0)
+
+    def raw(self, x: np.ndarray) -> float:
+        return float(np.mean((np.asarray(x, np.float64).reshape(self.reference.shape) - self.reference) ** 2
+                             * self.weight))
+
+    def __call__(self, x: np.ndarray) -> float:
+        return self.raw(x) - self.reference_noise
