@@ -66,7 +66,7 @@ sanitize: $(STAMPS)/venv ## Build the core with -fsanitize=address,undefined; ru
 	  $(PY) render/core/tests/sanitized_bindings.py build/sanitize $(SANITIZE_TESTS)
 	@rm -f build-sanitize.log
 
-bench: setup ## Benchmarks: ray engine throughput, geometry stage against grid size
+bench: setup ## Benchmarks: ray engine, geometry against grid size, PTPB against Mitsuba and mitransient
 	$(PY) benchmarks/bench_rays.py
 	@if [ -f benchmarks/bench_geometry.py ]; then $(PY) benchmarks/bench_geometry.py; fi
 	$(PY) benchmarks/bench_ptpb.py
