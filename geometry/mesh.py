@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.atomic import atomic_path
 
 
 @dataclass(frozen=True)
@@ -112,29 +111,14 @@ def decimate(mesh: TriangleMesh, max_triangles: int) -> TriangleMesh:
 
 def write_ply(path: str | Path, mesh: TriangleMesh, comment: str = "") -> Path:
     """Write a binary little-endian PLY (float32 vertices, uint8 + int32 faces), atomically."""
-    vertices = np.asarray(mesh.vertices, "<f4")
-    faces = np.empty(len(mesh.faces), dtype=[("count", "u1"), ("index", "<i4", (3,))])
-    faces["count"] = 3
-    faces["index"] = mesh.faces
-    header = ["ply", "format binary_little_endian 1.0"]
-    header += [f"comment {line}" for line in comment.splitlines() if line]
-    header += [f"element vertex {len(vertices)}", "property float x", "property float y", "property float z",
-               f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            f.write(("\n".join(header) + "\n").encode("ascii"))
-            f.write(vertices.tobytes())
-            f.write(faces.tobytes())
-    return Path(path)
+    from render import ply
+
+    return ply.write_ply(path, mesh.vertices, mesh.faces, comment)
 
 
 def read_ply(path: str | Path) -> TriangleMesh:
-    """Read a PLY written by ``write_ply`` (binary little-endian, triangles only)."""
-    data = Path(path).read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    nv = int(next(line.split()[2] for line in header if line.startswith("element vertex")))
-    nf = int(next(line.split()[2] for line in header if line.startswith("element face")))
-    vertices = np.frombuffer(data, "<f4", count=3 * nv, offset=end).reshape(nv, 3)
-    faces = np.frombuffer(data, [("count", "u1"), ("index", "<i4", (3,))], count=nf, offset=end + 12 * nv)
-    return TriangleMesh(vertices.astype(float), faces["index"].astype(np.int64))
+    """Read a binary little-endian triangle PLY, such as one written by ``write_ply``."""
+    from render import ply
+
+    vertices, faces = ply.read_ply(path)
+    return TriangleMesh(vertices.astype(float), faces.astype(np.int64))
