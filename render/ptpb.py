@@ -168,10 +168,12 @@ def render(
     """Render ``scene`` (the core dict above) with ``settings`` (a PTPBConfig, or a core settings
     dict with R_0/T_0 already in metres). ``overrides`` replace core settings keys (e.g. jitter).
     ``progress=True`` shows a tqdm bar; a callable receives the core's progress dicts.
-    Ctrl-C stops after the last complete iteration; ``stats["interrupted"]`` tells.
+    Ctrl-C (or a callback returning False) stops once the iteration under way is complete: its tiles
+    add straight into the sums, so it is finished rather than dropped; ``stats["interrupted"]`` tells.
 
     ``checkpoint(state)`` receives the accumulated state (``width``, ``height``, ``frame_count``,
-    ``seed``, float64 sums ``steady``/``early``/``late`` (H, W, 3) and ``frames`` (F, H, W, 3), the
+    ``seed``, float64 sums ``steady``/``early``/``late`` (H, W, 3), float32 sums ``frames`` (F, H, W, 3)
+    and, past 10^4 iterations, their float32 rounding remainders ``frames_carry``, the
     ``stats`` counters, ``snapshot_iterations``/``snapshot_seconds``/``snapshots``) every
     ``checkpoint_every_iterations`` iterations or ``checkpoint_every_s`` seconds and once more when
     the run is cancelled; ``resume=state`` continues from one, bit-identically (ptpb.md §9)."""

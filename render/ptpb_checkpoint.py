@@ -1,7 +1,8 @@
 """Checkpoints of progressive PTPB renders: the core's accumulated state, saved atomically as one
 ``checkpoint.npz`` and read back only for the same scene and settings.
 
-A checkpoint holds the float64 sums (steady, early, late, frames), the counters and timings, the
+A checkpoint holds the sums (steady, early and late in float64, the frames in float32 with, past
+10^4 iterations, their float32 rounding remainders ``frames_carry``), the counters and timings, the
 steady snapshots, the completed iteration count, the bandwidths of the last iteration and the
 seed. Random streams are keyed by (seed, iteration, index) (ptpb.md §9), so a render resumed from
 it ends with the same bits as one that was never interrupted.
@@ -24,10 +25,11 @@ import numpy as np
 from pipeline.atomic import atomic_path
 
 CHECKPOINT_NAME = "checkpoint.npz"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: float32 frame sums (and frames_carry); 1 held float64 frames
 RUN_ONLY_SETTINGS = ("iterations", "time_budget_s", "threads", "checkpoint_every_iterations", "checkpoint_every_s",
                      "memory_budget_gib")
 STATE_ARRAYS = ("steady", "early", "late", "frames")
+OPTIONAL_ARRAYS = ("frames_carry",)  # present past the core's compensated_sums_from (10^4) iterations
 
 
 def _canonical(value: Any) -> Any:
@@ -74,7 +76,8 @@ def save_checkpoint(path: Path, state: dict, fingerprint: dict) -> Path:
             np.savez(handle, meta=np.array(json.dumps(meta, sort_keys=True)),
                      snapshot_iterations=np.asarray(state["snapshot_iterations"], dtype=np.int64),
                      snapshot_seconds=np.asarray(state["snapshot_seconds"], dtype=np.float64),
-                     snapshots=state["snapshots"], **{k: state[k] for k in STATE_ARRAYS})
+                     snapshots=state["snapshots"], **{k: state[k] for k in (*STATE_ARRAYS, *OPTIONAL_ARRAYS)
+                                                      if k in state})
     return Path(path)
 
 
@@ -85,6 +88,7 @@ def load_checkpoint(path: Path, fingerprint: dict) -> dict:
         with np.load(path, allow_pickle=False) as saved:
             meta = json.loads(str(saved["meta"]))
             arrays = {k: saved[k] for k in (*STATE_ARRAYS, "snapshots", "snapshot_iterations", "snapshot_seconds")}
+            arrays.update({k: saved[k] for k in OPTIONAL_ARRAYS if k in saved.files})
     except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as exc:
         raise ValueError(f"{path}: cannot read the checkpoint ({exc})") from None
     if meta.get("format") != FORMAT_VERSION:
@@ -95,7 +99,7 @@ def load_checkpoint(path: Path, fingerprint: dict) -> dict:
                          "so it cannot continue this one")
     return {
         **{k: meta[k] for k in ("width", "height", "frame_count", "seed", "stats")},
-        **{k: arrays[k] for k in (*STATE_ARRAYS, "snapshots")},
+        **{k: arrays[k] for k in (*STATE_ARRAYS, *OPTIONAL_ARRAYS, "snapshots") if k in arrays},
         "snapshot_iterations": arrays["snapshot_iterations"].tolist(),
         "snapshot_seconds": arrays["snapshot_seconds"].tolist(),
     }

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import subprocess
+import os
 import sys
 import time
 
@@ -173,23 +174,29 @@ def test_illegal_media_are_refused_naming_the_key(medium, message):
 
 def test_memory_estimate_counts_every_image_buffer_of_the_core():
     sc = scene(res=12, bins=16)
-    values = 12 * 12 * 3 * (3 + 16)  # steady, early, late and 16 frames
-    assert memory_bytes(sc, settings()) == values * (8 + 8 + 4)  # double sums, double iteration buffers, float32
-    assert memory_bytes(sc, settings(), state_copy=True) == values * 28
-    assert memory_bytes(sc, settings(snapshot_every=1)) == values * 20 + 2 * 12 * 12 * 3 * 4
+    px3, frames = 12 * 12 * 3, 16
+    s = settings()
+    threads = s["threads"] or os.cpu_count()
+    tiles = threads * 16 * 16 * 3 * (3 + frames) * 8  # one double tile film (16 x 16 px) per thread
+    base = px3 * 3 * (8 + 4) + px3 * frames * 4 + tiles  # double steady/early/late + float32 results; float32 frames
+    assert memory_bytes(sc, s) == base
+    assert memory_bytes(sc, s, state_copy=True) == base + px3 * 3 * 8 + px3 * frames * 4
+    assert memory_bytes(sc, settings(snapshot_every=1)) == base + 2 * px3 * 4
     steady = {**sc, "film": {**sc["film"], "frame_mode": "steady"}}
-    assert memory_bytes(steady, settings()) == 12 * 12 * 3 * 3 * 20
+    assert memory_bytes(steady, s) == px3 * 3 * 12 + threads * 16 * 16 * 3 * 3 * 8
 
 
 def test_a_film_over_the_memory_budget_is_refused_at_once_with_the_keys_to_change():
-    huge = scene(res=4096, bins=1000)  # 1003 x 4096^2 x 3 values: 940 GiB of buffers
+    huge = scene(res=4096, bins=1000)  # 1000 float32 frames of 4096^2 x 3 values and the double planes: 189 GiB
     cfg = PTPBConfig(iterations=2, light_paths_per_iteration=100, initial_beam_radius=BeamRadius(value=0.03, unit="m"))
     t0 = time.perf_counter()
     with pytest.raises(ValueError) as refused:
         render(huge, cfg)
     assert time.perf_counter() - t0 < 5  # nothing was allocated or rendered
     message = str(refused.value)
-    assert "the film needs 940.31 GiB" in message and "1000 frames of 4096 x 4096 px" in message
+    px3, threads = 4096 * 4096 * 3, cfg.threads or os.cpu_count()
+    need = (px3 * 3 * 12 + px3 * 1000 * 4 + threads * 16 * 16 * 3 * 1003 * 8) / 2**30  # 189.20 GiB on 2 threads
+    assert f"the film needs {need:.2f} GiB" in message and "summed in float32" in message and "1000 frames of 4096 x 4096 px" in message
     for key in ("render.memory_budget_gib = 8", "scene.film.temporal_bins", "scene.camera.width/height",
                 "raise render.memory_budget_gib", "not split into chunks"):
         assert key in message, key

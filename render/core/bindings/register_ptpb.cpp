@@ -272,7 +272,8 @@ py::array_t<T> copy_array(const T* data, std::vector<py::ssize_t> shape) {
   return a;
 }
 
-// The checkpoint dict: the state's sums copied out as float64 arrays (the callback may keep them).
+// The checkpoint dict: the state's sums copied out (steady, early, late float64; frames and their
+// remainders float32) as arrays the callback may keep.
 py::dict state_dict(const RenderState& st) {
   const py::ssize_t H = st.height, W = st.width, F = st.frame_count, S = py::ssize_t(st.snapshots.size());
   py::dict out;
@@ -284,6 +285,7 @@ py::dict state_dict(const RenderState& st) {
   out["early"] = copy_array(st.early.data(), {H, W, 3});
   out["late"] = copy_array(st.late.data(), {H, W, 3});
   out["frames"] = copy_array(st.frames.data(), {F, H, W, 3});
+  if (!st.frames_carry.empty()) out["frames_carry"] = copy_array(st.frames_carry.data(), {F, H, W, 3});
   out["stats"] = stats_dict(st.stats);
   out["snapshot_iterations"] = py::cast(st.snapshot_iterations);
   out["snapshot_seconds"] = py::cast(st.snapshot_seconds);
@@ -297,6 +299,11 @@ py::dict state_dict(const RenderState& st) {
 template <typename T>
 std::vector<T> state_array(const py::dict& d, const char* key, std::vector<py::ssize_t> shape) {
   if (!d.contains(key)) throw std::invalid_argument(std::string("resume.") + key + " is required");
+  // A sum of another precision would resume rounded, not bit-identically: refuse it.
+  const py::array given = py::array::ensure(d[key]);
+  if (given && !given.dtype().is(py::dtype::of<T>()))
+    throw std::invalid_argument(std::string("resume.") + key + " must be " + (sizeof(T) == 4 ? "float32" : "float64") +
+                                ", got " + std::string(py::str(given.dtype())) + " (a state from another version?)");
   const auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(d[key]);
   if (!a) throw std::invalid_argument(std::string("resume.") + key + " must be an array of numbers");
   bool same = a.ndim() == py::ssize_t(shape.size());
@@ -317,7 +324,8 @@ RenderState parse_state(const py::dict& d) {
   st.steady = state_array<double>(d, "steady", {H, W, 3});
   st.early = state_array<double>(d, "early", {H, W, 3});
   st.late = state_array<double>(d, "late", {H, W, 3});
-  st.frames = state_array<double>(d, "frames", {F, H, W, 3});
+  st.frames = state_array<float>(d, "frames", {F, H, W, 3});
+  if (d.contains("frames_carry")) st.frames_carry = state_array<float>(d, "frames_carry", {F, H, W, 3});
   st.stats = parse_stats(require_key<py::dict>(d, "stats", w));
   st.snapshot_iterations = get<std::vector<int>>(d, "snapshot_iterations", {}, w);
   st.snapshot_seconds = get<std::vector<double>>(d, "snapshot_seconds", {}, w);
@@ -437,9 +445,9 @@ void register_ptpb(py::module_& m) {
         py::arg("resume") = py::none(), py::arg("checkpoint") = py::none(),
         "Render a scene dict with the PTPB renderer; returns a dict of arrays and statistics.\n"
         "The GIL is released while rendering; `progress(info) -> bool|None` is called about\n"
-        "twice a second and after each iteration; returning False or Ctrl-C stops after the\n"
-        "last complete iteration. `checkpoint(state) -> bool|None` receives the accumulated state\n"
-        "(float64 sums, stats, snapshots) every settings.checkpoint_every_iterations iterations or\n"
+        "twice a second and after each iteration; returning False or Ctrl-C stops when the\n"
+        "iteration under way is complete. `checkpoint(state) -> bool|None` receives the accumulated\n"
+        "state (sums, stats, snapshots) every settings.checkpoint_every_iterations iterations or\n"
         "checkpoint_every_s seconds, and once more on cancellation; `resume=state` continues it.");
   m.def("ptpb_memory_bytes", &memory_bytes_py, py::arg("scene"), py::arg("settings"), py::arg("state_copy") = false,
         "Peak bytes of the render's image buffers, as checked against settings.memory_budget_gib.");

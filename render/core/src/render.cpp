@@ -10,6 +10,8 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -58,6 +60,7 @@ void validate(const RenderSettings& s) {
   require(s.surface_normal_cos > 0 && s.surface_normal_cos <= 1, "surface_normal_cos must lie in (0, 1]");
   require(s.checkpoint_every_iterations >= 0, "checkpoint_every_iterations must be >= 0");
   require(std::isfinite(s.checkpoint_every_s) && s.checkpoint_every_s >= 0, "checkpoint_every_s must be >= 0 (s)");
+  require(s.compensated_sums_from >= 0, "compensated_sums_from must be >= 0");
   require(std::isfinite(s.memory_budget_gib) && s.memory_budget_gib >= 0, "memory_budget_gib must be >= 0 (0: no limit)");
 }
 
@@ -79,12 +82,13 @@ RenderState fresh_state(int W, int H, int F, std::uint64_t seed) {
   st.steady.assign(px3, 0.0);
   st.early.assign(px3, 0.0);
   st.late.assign(px3, 0.0);
-  st.frames.assign(std::size_t(F) * px3, 0.0);
+  st.frames.assign(std::size_t(F) * px3, 0.0f);
   return st;
 }
 
-bool all_finite(const std::vector<double>& v) {
-  for (double x : v)
+template <typename T>
+bool all_finite(const std::vector<T>& v) {
+  for (T x : v)
     if (!std::isfinite(x)) return false;
   return true;
 }
@@ -101,6 +105,13 @@ void validate_resume(const RenderState& st, const Scene& scene, const RenderSett
   require(st.steady.size() == px3 && st.early.size() == px3 && st.late.size() == px3 &&
               st.frames.size() == std::size_t(F) * px3,
           "its sums do not have the film's size");
+  require(st.frames_carry.empty() || st.frames_carry.size() == st.frames.size(),
+          "its frame remainders do not have the film's size");
+  require(st.frames_carry.empty() == (st.stats.iterations_done <= s.compensated_sums_from || F == 0),
+          st.frames_carry.empty() ? "it lacks the frame remainders a state past iteration " +
+                                        std::to_string(s.compensated_sums_from) + " holds"
+                                  : "it holds frame remainders before iteration " +
+                                        std::to_string(s.compensated_sums_from));
   require(st.seed == s.seed, "it was rendered with seed " + std::to_string(st.seed) + ", the settings have seed " +
                                  std::to_string(s.seed));
   const int done = st.stats.iterations_done;
@@ -111,7 +122,8 @@ void validate_resume(const RenderState& st, const Scene& scene, const RenderSett
   require(st.snapshot_iterations.size() == st.snapshots.size() && st.snapshot_seconds.size() == st.snapshots.size(),
           "its snapshot lists differ in length");
   for (const auto& snap : st.snapshots) require(snap.size() == px3, "a snapshot does not have the film's size");
-  require(all_finite(st.steady) && all_finite(st.early) && all_finite(st.late) && all_finite(st.frames),
+  require(all_finite(st.steady) && all_finite(st.early) && all_finite(st.late) && all_finite(st.frames) &&
+              all_finite(st.frames_carry),
           "its sums hold NaN or infinite values (a damaged checkpoint)");
   if (done == 0) return;
   double R, T, r_s, T_s;
@@ -141,29 +153,108 @@ struct CameraPass {
   double surface_radius, surface_time_half_width;
   Vec3d cam_origin, cam_left, cam_up, cam_forward;
   double tan_x, tan_y, far_length;
-  // Iteration buffers (double): steady/early/late are H*W*3, frames F*H*W*3.
-  double *steady, *early, *late, *frames;
+};
+
+// One tile's share of one iteration's film, in double (ptpb.md §9 "Memory"): planes of
+// tile_size^2 pixels x 3 for steady, early, late and then frame 0 .. F-1. The tile's owner splats
+// into it and then adds it to the shared sums (TileFilm::flush), which leaves it zeroed for the next
+// tile. Only frames [kmin, kmax] can be non-zero.
+struct TileFilm {
+  int side = 0, frames = 0;
+  std::size_t plane = 0;  // values per plane
+  std::vector<double> values;
+  int kmin = std::numeric_limits<int>::max(), kmax = -1;
+  int x0 = 0, y0 = 0;
+
+  TileFilm(int tile_size, int frame_count)
+      : side(tile_size), frames(frame_count), plane(std::size_t(tile_size) * tile_size * 3),
+        values(plane * (3 + std::size_t(frame_count)), 0.0) {}
+  double* steady(std::size_t local) { return values.data() + 3 * local; }
+  double* early(std::size_t local) { return values.data() + plane + 3 * local; }
+  double* late(std::size_t local) { return values.data() + 2 * plane + 3 * local; }
+  double* frame(int k, std::size_t local) {
+    kmin = std::min(kmin, k);
+    kmax = std::max(kmax, k);
+    return values.data() + (3 + std::size_t(k)) * plane + 3 * local;
+  }
+
+  // Adds the tile's pixels (the w x h at x0, y0 of a W-wide film) to the sums and zeroes them. The
+  // double sums take a plain add; the float frame sums take one rounding of (sum + value), or, with
+  // remainders, the new (sum, remainder) pair of sum + remainder + value.
+  void flush(RenderState& st, int W, int w, int h) {
+    const std::size_t px3 = std::size_t(W) * st.height * 3;
+    double* planes[3] = {st.steady.data(), st.early.data(), st.late.data()};
+    for (int q = 0; q < 3; ++q)
+      for (int ly = 0; ly < h; ++ly) {
+        double* src = values.data() + q * plane + std::size_t(ly) * side * 3;
+        double* dst = planes[q] + (std::size_t(y0 + ly) * W + x0) * 3;
+        for (int i = 0; i < 3 * w; ++i) { dst[i] += src[i]; src[i] = 0.0; }
+      }
+    const bool carry = !st.frames_carry.empty();
+    for (int k = kmin; k <= kmax; ++k)
+      for (int ly = 0; ly < h; ++ly) {
+        double* src = values.data() + (3 + std::size_t(k)) * plane + std::size_t(ly) * side * 3;
+        const std::size_t offset = std::size_t(k) * px3 + (std::size_t(y0 + ly) * W + x0) * 3;
+        float* dst = st.frames.data() + offset;
+        if (carry) {
+          float* rem = st.frames_carry.data() + offset;
+          for (int i = 0; i < 3 * w; ++i) {
+            const double total = double(dst[i]) + double(rem[i]) + src[i];
+            dst[i] = float(total);
+            rem[i] = float(total - double(dst[i]));
+            src[i] = 0.0;
+          }
+        } else {
+          for (int i = 0; i < 3 * w; ++i) { dst[i] = float(double(dst[i]) + src[i]); src[i] = 0.0; }
+        }
+      }
+    kmin = std::numeric_limits<int>::max();
+    kmax = -1;
+  }
+};
+
+// Tile films for the threads of a camera pass: a tile takes a free one and gives it back zeroed,
+// so which film a tile gets does not change any sum.
+class TileFilmPool {
+ public:
+  TileFilmPool(int tile_size, int frames) : tile_size_(tile_size), frames_(frames) {}
+  std::unique_ptr<TileFilm> take() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (free_.empty()) return std::make_unique<TileFilm>(tile_size_, frames_);
+    auto film = std::move(free_.back());
+    free_.pop_back();
+    return film;
+  }
+  void give_back(std::unique_ptr<TileFilm> film) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    free_.push_back(std::move(film));
+  }
+
+ private:
+  int tile_size_, frames_;
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<TileFilm>> free_;
 };
 
 struct PixelSplat {
   const CameraPass& p;
-  std::size_t pixel;
-  std::size_t frame_stride;
+  TileFilm& tile;
+  std::size_t local;  // the pixel's index within its tile
 
   // T: the temporal half-width of gate mode; beams and surfaces each pass their own T_i.
   void add(double tau, const Vec3d& v, bool timeless, double T) const {
-    double* s = p.steady + 3 * pixel;
+    double* s = tile.steady(local);
     s[0] += v.x; s[1] += v.y; s[2] += v.z;
     const Film& film = p.cs->scene().film;
     if (film.mode == FrameMode::Steady || timeless) return;
     const double rel = (tau - film.start_opl) / film.bin_width_opl;
     const int F = film.temporal_bins;
-    double* side = rel < 0 ? p.early : (rel >= F ? p.late : nullptr);
-    if (side) { side[3 * pixel] += v.x; side[3 * pixel + 1] += v.y; side[3 * pixel + 2] += v.z; }
+    double* side = rel < 0 ? tile.early(local) : (rel >= F ? tile.late(local) : nullptr);
+    if (side) { side[0] += v.x; side[1] += v.y; side[2] += v.z; }
     if (film.mode == FrameMode::Bins) {
       if (side) return;
       const int k = std::min(F - 1, static_cast<int>(std::floor(rel)));
-      double* f = p.frames + k * frame_stride + 3 * pixel;
+      double* f = tile.frame(k, local);
       f[0] += v.x; f[1] += v.y; f[2] += v.z;
       return;
     }
@@ -178,7 +269,7 @@ struct PixelSplat {
       const double tk = film.start_opl + (k + 0.5) * dt;
       const double w = temporal_kernel(p.st->temporal_kernel, tk - tau, T);
       if (w == 0.0) continue;
-      double* f = p.frames + k * frame_stride + 3 * pixel;
+      double* f = tile.frame(k, local);
       f[0] += w * v.x; f[1] += w * v.y; f[2] += w * v.z;
     }
   }
@@ -201,11 +292,13 @@ void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, cons
   cand.clear();
   p.accel->query(pos, dir, t_q, cand);
   ++ts.queries;
-  // Canonical order makes the sum independent of traversal and thread count (§9).
-  std::sort(cand.begin(), cand.end());
+  // Canonical order makes the sum independent of traversal and thread count (§9): the structures
+  // hand their candidates over sorted (BeamAccel::query), and only near-parallel ones can repeat.
   cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
   ts.candidates += cand.size();
   const std::vector<Beam>& beams = *p.beams;
+  const bool short_query = st.query_beam_kind == BeamKind::Short;
+  const Vec3d query_weight = weight * m.sigma_s * p.inv_paths;
   for (std::uint32_t bi : cand) {
     const Beam& b = beams[bi];
     if (b.medium != medium) { ++ts.false_positives; continue; }
@@ -218,12 +311,13 @@ void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, cons
     }
     const double k_r = spatial_kernel_1d(st.spatial_kernel, ca.u, p.radius);
     const double phase = hg_eval(dot(b.direction, -dir), m.g);
-    Vec3d tr_c = transmittance(sigma_t, ca.t);
-    if (st.query_beam_kind == BeamKind::Short) tr_c = tr_c / survival_mixture(sigma_t, ca.t);
-    Vec3d tr_b = transmittance(sigma_t, ca.s);
-    if (b.kind == BeamKind::Short) tr_b = tr_b / survival_mixture(sigma_t, ca.s);
-    const double scalar = k_r * phase / std::sqrt(ca.sin2) * p.inv_paths;
-    const Vec3d value = weight * m.sigma_s * tr_c * tr_b * b.power * scalar;
+    // Tr(t_c) Tr(s_b) in one exponential per channel; short beams divide by their survival.
+    const Vec3d tr = transmittance(sigma_t, ca.t + ca.s);
+    double survival = 1.0;
+    if (short_query) survival = survival_mixture(sigma_t, ca.t);
+    if (b.kind == BeamKind::Short) survival *= survival_mixture(sigma_t, ca.s);
+    const double scalar = k_r * phase / (std::sqrt(ca.sin2) * survival);
+    const Vec3d value = query_weight * tr * b.power * scalar;
     const double tau = b.tau0 + n * ca.s + (st.camera_unwarp ? 0.0 : n * ca.t + tau_c);
     splat.add(tau, value, b.timeless, p.time_half_width);
     ++ts.pairs;
@@ -261,7 +355,8 @@ void gather_surface(const CameraPass& p, const PixelSplat& splat, const Vec3d& x
   }
 }
 
-void trace_camera_path(const CameraPass& p, int px, int py, std::vector<std::uint32_t>& cand, TileStats& ts) {
+void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std::vector<std::uint32_t>& cand,
+                       TileStats& ts) {
   const CompiledScene& cs = *p.cs;
   const Scene& scene = cs.scene();
   const RenderSettings& st = *p.st;
@@ -273,7 +368,7 @@ void trace_camera_path(const CameraPass& p, int px, int py, std::vector<std::uin
   // Mitsuba's perspective sensor: +x of camera space is "left", film y points down.
   Vec3d dir = normalize(p.cam_left * ((1.0 - 2.0 * sx) * p.tan_x) + p.cam_up * ((1.0 - 2.0 * sy) * p.tan_y) +
                         p.cam_forward);
-  const PixelSplat splat{p, pixel, std::size_t(W) * H * 3};
+  const PixelSplat splat{p, tile, std::size_t(py - tile.y0) * tile.side + std::size_t(px - tile.x0)};
   Vec3d pos = p.cam_origin, weight{1, 1, 1};
   int medium = scene.camera.medium, depth_c = 0;
   double tau_c = 0.0;
@@ -379,14 +474,23 @@ void surface_bandwidths(FrameMode mode, const RenderSettings& s, long iteration,
   }
 }
 
+bool uses_frame_remainders(const RenderSettings& s) {
+  return s.time_budget_s > 0 || s.iterations > s.compensated_sums_from;
+}
+
 double render_memory_bytes(const Scene& scene, const RenderSettings& s, bool state_copy) {
   const double px3 = double(std::max(0, scene.camera.width)) * double(std::max(0, scene.camera.height)) * 3.0;
-  const double values = px3 * (3.0 + film_frame_count(scene.film));  // steady, early, late and the frames
+  const double F = film_frame_count(scene.film);
   const double snapshots = s.snapshot_every > 0 && s.time_budget_s <= 0 ? double(s.iterations / s.snapshot_every) : 0.0;
   const double snapshot_bytes = snapshots * px3 * sizeof(float);
-  // Sums and per-iteration buffers in double, the float32 results built while the sums still live.
-  double bytes = values * (2 * sizeof(double) + sizeof(float)) + snapshot_bytes;
-  if (state_copy) bytes += values * sizeof(double) + snapshot_bytes;
+  // Double sums of steady, early, late and their float32 results; float32 frame sums (scaled in
+  // place into the result), with as many remainders in a long run; a double tile film per thread.
+  const double planes = 3.0 * px3 * (sizeof(double) + sizeof(float));
+  const double frames = F * px3 * sizeof(float) * (uses_frame_remainders(s) ? 2.0 : 1.0);
+  const double tiles = double(resolve_thread_count(s.threads)) * double(s.tile_size) * s.tile_size * 3.0 * (3.0 + F) *
+                       sizeof(double);
+  double bytes = planes + frames + tiles + snapshot_bytes;
+  if (state_copy) bytes += 3.0 * px3 * sizeof(double) + frames + snapshot_bytes;
   return bytes;
 }
 
@@ -399,7 +503,7 @@ void check_memory_budget(const Scene& scene, const RenderSettings& s, bool state
   throw std::invalid_argument(
       "the film needs " + gib_text(bytes) + " for its image buffers (" + std::to_string(film_frame_count(scene.film)) +
       " frames of " + std::to_string(scene.camera.width) + " x " + std::to_string(scene.camera.height) +
-      " px, summed in double precision), more than render.memory_budget_gib = " + budget +
+      " px, summed in float32), more than render.memory_budget_gib = " + budget +
       "; lower scene.film.temporal_bins or scene.camera.width/height, or raise render.memory_budget_gib "
       "(frames are not split into chunks: every pair splats into all its frames in one pass)");
 }
@@ -425,7 +529,6 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   stats.cancelled = false;
   const double time_before = stats.time_total_s;  // render time of the runs this one continues
   auto elapsed = [&] { return time_before + seconds_since(t_start); };
-  std::vector<double> it_steady(px_count * 3), it_early(px_count * 3), it_late(px_count * 3), it_frames(frame_values);
 
   CameraPass pass{};
   pass.cs = &cs;
@@ -446,10 +549,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   pass.tan_y = pass.tan_x / aspect;
   pass.far_length = 4.0 * cs.sphere_radius() + length(cam.origin - cs.sphere_center());
   pass.inv_paths = 1.0 / double(settings.light_paths_per_iteration);
-  pass.steady = it_steady.data();
-  pass.early = it_early.data();
-  pass.late = it_late.data();
-  pass.frames = it_frames.data();
+  TileFilmPool tile_films(settings.tile_size, F);
 
   auto accel = make_beam_accel(settings.accel, settings.grid_resolution, settings.dice_length);
   const std::thread::id caller = std::this_thread::get_id();
@@ -488,6 +588,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   const long max_iterations = settings.time_budget_s > 0 ? (1L << 40) : settings.iterations;
   const std::uint64_t M = settings.light_paths_per_iteration;
   constexpr std::size_t kPathChunk = 256;
+  constexpr int kChunksPerThread = 16;  // light-path chunks per thread in one group
 
   auto report = [&](int done, double R, double T, std::uint64_t nbeams, double r_s, std::uint64_t nphotons) {
     if (!progress) return;
@@ -509,21 +610,42 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
 
     // 1. Light paths, in fixed chunks of path indices; beams and photons kept in path order (§9).
     auto t0 = Clock::now();
+    // Traced a group of chunks at a time and appended in chunk order, so that at most one group's
+    // records exist twice (ptpb.md §9 "Memory").
     const std::size_t path_chunks = (M + kPathChunk - 1) / kPathChunk;
-    std::vector<LightRecords> chunk_records(path_chunks);
-    parallel_for_chunks(path_chunks, 1, settings.threads, [&](std::size_t c0, std::size_t c1) {
-      for (std::size_t c = c0; c < c1; ++c) {
-        const std::uint64_t end = std::min<std::uint64_t>(M, (c + 1) * kPathChunk);
-        for (std::uint64_t j = c * kPathChunk; j < end; ++j) trace_light_path(cs, settings, it, j, chunk_records[c]);
-      }
-    });
+    const std::size_t group = std::size_t(kChunksPerThread) * resolve_thread_count(settings.threads);
     beams.clear();
     photons.clear();
-    for (auto& rec : chunk_records) {
-      beams.insert(beams.end(), rec.beams.begin(), rec.beams.end());
-      photons.insert(photons.end(), rec.photons.begin(), rec.photons.end());
+    for (std::size_t g0 = 0; g0 < path_chunks; g0 += group) {
+      const std::size_t g1 = std::min(path_chunks, g0 + group);
+      std::vector<LightRecords> chunk_records(g1 - g0);
+      parallel_for_chunks(g1 - g0, 1, settings.threads, [&](std::size_t c0, std::size_t c1) {
+        for (std::size_t c = c0; c < c1; ++c) {
+          const std::uint64_t end = std::min<std::uint64_t>(M, (g0 + c + 1) * kPathChunk);
+          for (std::uint64_t j = (g0 + c) * kPathChunk; j < end; ++j)
+            trace_light_path(cs, settings, it, j, chunk_records[c]);
+        }
+      });
+      if (g0 == 0 && beams.capacity() == 0) {
+        // Room for the whole iteration at the first group's rate, with a margin: capacity that is
+        // never written costs address space, not memory, and a vector that grows by doubling would
+        // hold its old and new buffers at once.
+        std::size_t first_beams = 0, first_photons = 0;
+        for (const auto& rec : chunk_records) {
+          first_beams += rec.beams.size();
+          first_photons += rec.photons.size();
+        }
+        const double scale = 1.25 * double(M) / double(std::min<std::uint64_t>(M, g1 * kPathChunk));
+        beams.reserve(std::size_t(scale * double(first_beams)) + 1024);
+        photons.reserve(std::size_t(scale * double(first_photons)) + 1024);
+      }
+      for (auto& rec : chunk_records) {
+        beams.insert(beams.end(), rec.beams.begin(), rec.beams.end());
+        photons.insert(photons.end(), rec.photons.begin(), rec.photons.end());
+        std::vector<Beam>().swap(rec.beams);
+        std::vector<SurfacePhoton>().swap(rec.photons);
+      }
     }
-    chunk_records.clear();
     stats.time_light_s += seconds_since(t0);
 
     // 2. The beam structure, with this iteration's radius.
@@ -536,10 +658,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
 
     // 3. Camera pass by tiles; each tile owns its pixels.
     t0 = Clock::now();
-    std::fill(it_steady.begin(), it_steady.end(), 0.0);
-    std::fill(it_early.begin(), it_early.end(), 0.0);
-    std::fill(it_late.begin(), it_late.end(), 0.0);
-    std::fill(it_frames.begin(), it_frames.end(), 0.0);
+    if (it >= settings.compensated_sums_from && F > 0 && state.frames_carry.empty()) state.frames_carry.assign(frame_values, 0.0f);
     pass.beams = &beams;
     pass.accel = accel.get();
     pass.iteration = static_cast<std::uint64_t>(it);
@@ -549,14 +668,20 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     pass.photon_grid = &photon_grid;
     pass.surface_radius = photon_grid.radius();
     pass.surface_time_half_width = T_s;
+    // Tiles add straight into the sums, so a pass is never left half done: a cancel that arrives
+    // during it takes effect after it (ptpb.md §9; the iteration is kept, not dropped).
     parallel_for_chunks(std::size_t(tiles_x) * tiles_y, 1, settings.threads, [&](std::size_t t_begin, std::size_t t_end) {
       std::vector<std::uint32_t> cand;
+      std::unique_ptr<TileFilm> tile = tile_films.take();
       for (std::size_t t = t_begin; t < t_end; ++t) {
-        if (cancel.load()) return;
         TileStats ts;
         const int x0 = int(t % tiles_x) * settings.tile_size, y0 = int(t / tiles_x) * settings.tile_size;
-        for (int y = y0; y < std::min(H, y0 + settings.tile_size); ++y)
-          for (int x = x0; x < std::min(W, x0 + settings.tile_size); ++x) trace_camera_path(pass, x, y, cand, ts);
+        const int x1 = std::min(W, x0 + settings.tile_size), y1 = std::min(H, y0 + settings.tile_size);
+        tile->x0 = x0;
+        tile->y0 = y0;
+        for (int y = y0; y < y1; ++y)
+          for (int x = x0; x < x1; ++x) trace_camera_path(pass, *tile, x, y, cand, ts);
+        tile->flush(state, W, x1 - x0, y1 - y0);
         counters.queries += ts.queries;
         counters.candidates += ts.candidates;
         counters.pairs += ts.pairs;
@@ -568,16 +693,9 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
         if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5)
           report(int(it), R, T, beams.size(), r_s, photons.size());
       }
+      tile_films.give_back(std::move(tile));
     });
     stats.time_camera_s += seconds_since(t0);
-    if (cancel.load()) break;  // the unfinished iteration is dropped
-
-    for (std::size_t i = 0; i < state.steady.size(); ++i) {
-      state.steady[i] += it_steady[i];
-      state.early[i] += it_early[i];
-      state.late[i] += it_late[i];
-    }
-    for (std::size_t i = 0; i < frame_values; ++i) state.frames[i] += it_frames[i];
     stats.iterations_done = int(it + 1);
     stats.light_paths += M;
     stats.beams += beams.size();
@@ -619,7 +737,15 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   to_float(state.steady, result.steady, &stats.steady_total);
   to_float(state.early, result.early, &stats.early_total);
   to_float(state.late, result.late, &stats.late_total);
-  to_float(state.frames, result.frames, nullptr);
+  // The frame sums become the averages in place: no second film at the end.
+  result.frames = std::move(state.frames);
+  if (state.frames_carry.empty()) {
+    for (float& f : result.frames) f = float(double(f) * inv_n);
+  } else {
+    for (std::size_t i = 0; i < result.frames.size(); ++i)
+      result.frames[i] = float((double(result.frames[i]) + double(state.frames_carry[i])) * inv_n);
+    std::vector<float>().swap(state.frames_carry);
+  }
   stats.time_total_s = elapsed();
   result.stats = stats;
   result.snapshot_iterations = std::move(state.snapshot_iterations);

@@ -199,6 +199,43 @@ bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
 }
 
+TEST_CASE("frame sums with rounding remainders: same averages, resumed bit-identically across the switch") {
+  const Scene sc = cube_scene();
+  RenderSettings s = small_settings();
+  s.iterations = 6;
+  const RenderResult plain = render(sc, s);
+  s.compensated_sums_from = 3;  // iterations 3..5 add into (sum, remainder) pairs
+  s.checkpoint_every_iterations = 2;
+  std::vector<RenderState> states;
+  const RenderResult whole = render(sc, s, nullptr, std::nullopt, [&](const RenderState& st) {
+    states.push_back(st);
+    return true;
+  });
+  CHECK(states.size() == 2);
+  if (states.size() != 2) return;
+  CHECK(states[0].frames_carry.empty() && states[1].frames_carry.size() == states[1].frames.size());
+  // The pairs only change rounding: the averages agree with the plain float sums to float accuracy.
+  double worst = 0.0, peak = 0.0;
+  for (float v : plain.frames) peak = std::max(peak, double(v));
+  for (std::size_t i = 0; i < plain.frames.size(); ++i)
+    worst = std::max(worst, std::fabs(double(plain.frames[i]) - double(whole.frames[i])));
+  CHECK(peak > 0 && worst <= 1e-6 * peak);
+  CHECK(same_bits(plain.steady, whole.steady));  // the double sums are untouched
+  for (const RenderState& st : states) {
+    const RenderResult resumed = render(sc, s, nullptr, st);
+    CHECK(same_bits(whole.frames, resumed.frames) && same_bits(whole.steady, resumed.steady));
+  }
+  // A state past the switch without its remainders is refused, naming them.
+  RenderState damaged = states[1];
+  damaged.frames_carry.clear();
+  try {
+    render(sc, s, nullptr, damaged);
+    CHECK(false);
+  } catch (const std::invalid_argument& e) {
+    CHECK(std::string(e.what()).find("remainders") != std::string::npos);
+  }
+}
+
 TEST_CASE("a render resumed from a checkpoint has the bits of an uninterrupted one") {
   for (FrameMode mode : {FrameMode::Bins, FrameMode::Gate}) {
     Scene sc = cube_scene();
@@ -295,11 +332,18 @@ TEST_CASE("a cancelled render hands its completed iterations to the checkpoint c
 TEST_CASE("a film over the memory budget is refused before it is allocated") {
   Scene sc = cube_scene();  // 24 x 20 px, 40 bins
   RenderSettings s = small_settings();
-  const double values = 24.0 * 20 * 3 * (3 + 40);
-  CHECK(render_memory_bytes(sc, s, false) == values * 20);  // double sums + double iteration buffers + float32
-  CHECK(render_memory_bytes(sc, s, true) == values * 28);
+  const double px3 = 24.0 * 20 * 3, F = 40;
+  // Double steady/early/late sums with their float32 results, float32 frame sums scaled in place,
+  // and one double tile film (tile_size^2 x 3 x (3 + F)) per thread.
+  const double tiles = s.threads * double(s.tile_size) * s.tile_size * 3 * (3 + F) * 8;
+  const double base = px3 * 3 * (8 + 4) + px3 * F * 4 + tiles;
+  CHECK(render_memory_bytes(sc, s, false) == base);
+  CHECK(render_memory_bytes(sc, s, true) == base + px3 * 3 * 8 + px3 * F * 4);  // the state's copy
   s.snapshot_every = 1;
-  CHECK(render_memory_bytes(sc, s, false) == values * 20 + 3 * 24.0 * 20 * 3 * 4);
+  CHECK(render_memory_bytes(sc, s, false) == base + s.iterations * px3 * 4);
+  s.snapshot_every = 0;
+  s.iterations = s.compensated_sums_from + 1;  // past 10^4 iterations the frame sums carry remainders
+  CHECK(render_memory_bytes(sc, s, false) == base + px3 * F * 4);
   s = small_settings();
   sc.film.temporal_bins = 100000;
   sc.camera.width = sc.camera.height = 4096;  // 37.5 TiB of buffers

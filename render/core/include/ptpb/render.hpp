@@ -49,6 +49,9 @@ struct RenderSettings {
   double checkpoint_every_s = 0.0;
   // render() refuses a film whose buffers (render_memory_bytes) exceed this many GiB; 0 = no limit.
   double memory_budget_gib = 8.0;
+  // From this iteration on the float32 frame sums carry their rounding remainders (RenderState).
+  // Not a user setting (the bindings keep the default); tests lower it to reach that code.
+  int compensated_sums_from = 10000;
 };
 
 struct Progress {
@@ -88,7 +91,11 @@ struct RenderState {
   int width = 0, height = 0, frame_count = 0;
   std::uint64_t seed = 0;
   std::vector<double> steady, early, late;  // H x W x 3
-  std::vector<double> frames;               // F x H x W x 3
+  // F x H x W x 3 in float32 (ptpb.md §9: float sums are exact enough up to ~10^4 iterations).
+  // From iteration settings.compensated_sums_from on, frames_carry (same size) holds each sum's rounding
+  // remainder: the sum is then frames + frames_carry, about 48 significant bits. Empty before.
+  std::vector<float> frames;
+  std::vector<float> frames_carry;
   RenderStats stats;
   std::vector<int> snapshot_iterations;
   std::vector<double> snapshot_seconds;
@@ -118,9 +125,10 @@ RenderResult render(const Scene& scene, const RenderSettings& settings,
                     const ProgressCallback& progress = nullptr, std::optional<RenderState> resume = std::nullopt,
                     const CheckpointCallback& checkpoint = nullptr);
 
-// Peak bytes of render()'s image buffers (§9 "Memory"): the double sums and the double
-// per-iteration buffers of steady, early and late (H W 3 each) and of the frames (F H W 3), the
-// float32 results made from the sums at the end, and the float32 steady snapshots. With
+// Peak bytes of render()'s image buffers (§9 "Memory"): the double sums of steady, early and late
+// (H W 3 each), the float32 frame sums (F H W 3; twice that with the remainders of a run past
+// settings.compensated_sums_from iterations or on a time budget), one tile buffer per thread, the float32
+// results (the frames are scaled in place, not copied) and the float32 steady snapshots. With
 // `state_copy` (a checkpoint callback or a resume state) one more copy of the sums and snapshots.
 // Frames are never split into chunks: every ray-beam pair splats into all the frames its kernel
 // covers within one pass, so a film that does not fit is refused instead.
