@@ -93,33 +93,44 @@ def test_steady_cube_mean_and_convergence_against_mitsuba_volpath():
 @pytest.mark.mitsuba
 @pytest.mark.slow
 def test_transient_bins_match_mitransient_frame_by_frame():
-    scene = cube_scene("bins", res=RES)
-    # 27 bins of 0.15 m from 3.5 m: the whole pulse, its multiple-scattering tail included. Bins a few
-    # kernel radii wide keep both sides' per-frame noise near 1 % at this image size.
-    film = scene["film"] = {**scene["film"], "temporal_bins": 27, "bin_width_opl": 0.15}
-    # Two mitransient runs of 16384 spp differ from each other by up to 6 % in single frames here;
-    # their average is the reference.
-    (frames_a, steady_a), (frames_b, steady_b) = (mitsuba_cube(spp=16384, seed=seed, film=film) for seed in (3, 4))
-    frames_ref, steady_ref = 0.5 * (frames_a + frames_b), 0.5 * (steady_a + steady_b)
+    """Issue 4: per-frame means within 3 % of mitransient for every frame above 1 % of the energy.
+
+    The frame mean is the image-plane average of a box-filtered pinhole film, the same at any
+    resolution, so ours renders the cube at 72 x 72 (9x the queries of 24 x 24 per light path,
+    for 30 % more time) against mitransient at 24 x 24. Measured on 64 mitransient runs and 16 of
+    ours: single runs scatter by 0.4-2.8 % (mitransient, 16384 spp) and 1-5 % (ours, 48 x 40k
+    paths) per frame; the 16-run means agree within 2.1 % (the first frame, the kernel's loss at
+    the lit faces) and within 0.85 % on average. About 3 minutes on 2 cores."""
+    film = {**cube_scene("bins")["film"], "temporal_bins": 27, "bin_width_opl": 0.15}  # the pulse and its tail
+    refs = [mitsuba_cube(spp=16384, seed=seed, film=film) for seed in range(3, 19)]
+    ref_profiles = np.array([frames.mean(axis=(1, 2, 3)) for frames, _ in refs])
+    frames_ref = np.mean([frames for frames, _ in refs], axis=0)
+    steady_ref = np.mean([steady for _, steady in refs], axis=0)
     assert frames_ref.shape == (film["temporal_bins"], RES, RES, 3)
+    # Both sides bin the same energy: the frames sum to each side's steady image (ptpb.md §10 test 1).
+    assert frames_ref.sum() == pytest.approx(steady_ref.sum(), rel=3e-3)  # less the tail after end_opl
+
+    scene = cube_scene("bins", res=3 * RES)
+    scene["film"] = film
     # R_0 = 1 cm: the kernel's mass lost outside the lit faces takes the earliest light first.
     settings = {"iterations": 48, "light_paths_per_iteration": 40000, "initial_beam_radius": 0.01, "alpha": 0.8,
                 "max_depth": MAXD, "rr_depth": 5, "threads": 2}
-    runs = [render(scene, {**settings, "seed": seed}) for seed in (31, 32, 33, 34)]
-    frames = np.mean([r.frames for r in runs], axis=0)
-    # Both sides bin the same energy: the frames sum to each side's steady image (ptpb.md §10 test 1).
-    assert frames_ref.sum() == pytest.approx(steady_ref.sum(), rel=3e-3)  # less the tail after end_opl
-    profile_ref = frames_ref.mean(axis=(1, 2, 3))
-    profile = frames.mean(axis=(1, 2, 3))
+    profiles = np.array([render(scene, {**settings, "seed": seed}).frames.mean(axis=(1, 2, 3))
+                         for seed in range(31, 47)])
+
+    profile_ref, profile = ref_profiles.mean(axis=0), profiles.mean(axis=0)
     energetic = profile_ref > 0.01 * profile_ref.sum()
-    assert energetic.sum() >= 8
+    assert energetic.sum() >= 10
     ratio = profile[energetic] / profile_ref[energetic]
-    print("per-frame ours/mitransient:", np.round(ratio, 3))
-    # Issue 4 asks for 3 % per frame. At this budget (4 x 48 iterations of 40k paths) we measured up
-    # to 5.4 % on single frames and 2.1 % on average; with 8 x 48 iterations 3.8 % and 1.3 %, the worst
-    # frame being one where the two references disagree by 6 %. So: 6 % per frame, 2.5 % on average.
-    np.testing.assert_allclose(ratio, 1.0, atol=0.06)
-    assert np.mean(np.abs(ratio - 1)) < 0.025
+    # The comparison must be able to resolve 3 %: the standard error of the ratio, from the spread
+    # of the runs on both sides, is 0.3-0.9 % on most frames and 1.1-1.4 % on the late, faint ones.
+    se = np.hypot(profiles.std(axis=0, ddof=1) / profile / np.sqrt(len(profiles)),
+                  ref_profiles.std(axis=0, ddof=1) / profile_ref / np.sqrt(len(ref_profiles)))[energetic]
+    print("per-frame ours/mitransient:", np.round(ratio, 4))
+    print("standard error of the ratio:", np.round(se, 4))
+    assert se.max() < 0.015 and np.median(se) < 0.008
+    np.testing.assert_allclose(ratio, 1.0, atol=0.03)
+    assert np.mean(np.abs(ratio - 1)) < 0.015
     # The onset: the first frame above 1 % of the peak is the same on both sides, within one frame.
     onset = lambda p: int(np.argmax(p > 0.01 * p.max()))  # noqa: E731
     assert abs(onset(profile) - onset(profile_ref)) <= 1
