@@ -68,12 +68,13 @@ def mitsuba_cube(spp: int, seed: int = 0, film: dict | None = None):
 @pytest.mark.slow
 def test_steady_cube_mean_and_convergence_against_mitsuba_volpath():
     # Two independent 16384-spp references: their average is ~10x less noisy than our renders below.
-    ref = 0.5 * (mitsuba_cube(spp=16384, seed=0) + mitsuba_cube(spp=16384, seed=1))
+    ref_a, ref_b = mitsuba_cube(spp=16384, seed=0), mitsuba_cube(spp=16384, seed=1)
+    ref = 0.5 * (ref_a + ref_b)
     medium = ref.mean(-1) > 1e-3 * ref.mean(-1).max()  # pixels that see the lit medium
     assert medium.sum() > 0.2 * RES * RES
     settings = {"iterations": 64, "light_paths_per_iteration": 20000, "initial_beam_radius": 0.02, "alpha": 0.8,
                 "max_depth": MAXD, "rr_depth": 5, "threads": 2, "snapshot_every": 8}
-    runs = [render(cube_scene("steady", res=RES), {**settings, "seed": seed}) for seed in (12, 13)]
+    runs = [render(cube_scene("steady", res=RES), {**settings, "seed": seed}) for seed in range(12, 18)]
     ratio = np.mean([r.steady[medium].mean(0) for r in runs], axis=0) / ref[medium].mean(0)
     print("ours/mitsuba per channel:", ratio)
     # Issue 4 asks for the mean within 2 %; per channel we allow 3 % for the noise of the runs.
@@ -81,7 +82,12 @@ def test_steady_cube_mean_and_convergence_against_mitsuba_volpath():
     np.testing.assert_allclose(ratio, 1.0, atol=0.03)
     its = np.array([it for it, _ in runs[0].snapshots], dtype=float)
     rel = np.mean([[((s - ref) ** 2 / (ref**2 + 1e-2)).mean() for _, s in r.snapshots] for r in runs], axis=0)
-    print("iterations", its, "relMSE", rel)
+    # The reference's own noise adds to every point and flattens the fit: take out its expected share,
+    # E[(a - b)^2] / 4 per value for the mean of two independent halves.
+    ref_noise = ((ref_a - ref_b) ** 2 / 4 / (ref**2 + 1e-2)).mean()
+    print("iterations", its, "relMSE", rel, "reference noise", ref_noise)
+    rel = rel - ref_noise
+    assert ref_noise < 0.2 * rel[-1]  # a small correction
     upper = its >= 16
     assert np.all(np.diff(rel[its >= 8][::2]) < 0), rel  # 8, 24, 40, 56 iterations: falling
     slope = np.polyfit(np.log(its[upper]), np.log(rel[upper]), 1)[0]
