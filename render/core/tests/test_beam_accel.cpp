@@ -153,6 +153,26 @@ TEST_CASE("degenerate beams: identical, zero length, axis-aligned, far from the 
   check_structures(far, 0.01, 200, 5, "far from the origin", offset);
 }
 
+TEST_CASE("automatic dicing: a few R, but about two pieces a beam at most") {
+  KeyedRng rng(31, 0, StreamDomain::Test, 6);
+  // Long beams at a small R (the cube of ptpb.md §10 test 4): 4R would cut each into ~20 pieces.
+  std::vector<Beam> beams = random_beams(rng, 2000, 1.0, 1.6);  // mean length 0.8 m
+  auto accel = make_beam_accel(AccelKind::Embree, 32, 0.0);
+  accel->build(beams, 0.01, 2);
+  const double per_beam = double(accel->references()) / beams.size();
+  std::fprintf(stderr, "long beams: %.2f pieces a beam\n", per_beam);
+  CHECK(per_beam >= 1.0 && per_beam <= 3.0);  // ceil(L / (mean L / 2)) averages 2.5 here
+  // An explicit piece length is kept: 3R = 3 cm gives ~27 pieces a beam.
+  auto fine = make_beam_accel(AccelKind::Embree, 32, 0.03);
+  fine->build(beams, 0.01, 2);
+  CHECK(double(fine->references()) / beams.size() > 20.0);
+  // Short beams at a large R keep one piece each.
+  std::vector<Beam> short_beams = random_beams(rng, 2000, 1.0, 0.1);
+  accel->build(short_beams, 0.05, 2);
+  CHECK(accel->references() == short_beams.size());
+  check_structures(beams, 0.01, 200, 8, "long beams, automatic pieces");
+}
+
 TEST_CASE("empty structures answer nothing") {
   for (AccelKind kind : {AccelKind::Embree, AccelKind::Grid}) {
     auto accel = make_beam_accel(kind, 8, 0.0);
