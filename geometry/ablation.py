@@ -6,12 +6,17 @@
 E_dir,h = S_b V_sun max(0, s_z - s . grad h) is the direct beam per unit horizontal area; under one
 sun it is an advection along the beam, so the slope is upwinded on the sun's side. Sky and terrain
 light are per unit true area and recede along the normal (Godunov factor). L_eff blends
-sublimation and melt through Lliboutry's switch; k = max(0, Q - sink) / Q keeps the part of each
-day's absorbed shortwave Q above the loss to the sky (geometry.sky_loss times the sky view). The
-linear terms are integrated exactly in Fourier space on flux time. Time stepping freezes the
-geometry for each horizon refresh (one per simulated day by default), integrates the absorbed
-energy over that period's sun positions, and applies it in sub-steps that each respect the
-Hamilton-Jacobi CFL limit (6.2). Heights are [m], times [s].
+sublimation and melt through Lliboutry's switch. A steep cell's column stands for its top and for
+the wall face down to the neighbour its upwind slope is taken to, so 1/L_eff is integrated over
+that surface: the top at the cell's own value, the face at the mean of its two ends (trapezoid
+rule). Weighting the whole column by its top would let a one-cell crest sublimate its sunlit
+wall, however deep and sheltered, and grid-scale walls between pits would never fall.
+k = max(0, Q - sink) / Q keeps the part of each day's absorbed shortwave Q above the loss to the
+sky (geometry.sky_loss times the sky view). The linear terms are integrated exactly in Fourier
+space on flux time. Time stepping freezes the geometry for each horizon refresh (one per
+simulated day by default), integrates the absorbed energy over that period's sun positions, and
+applies it in sub-steps that each respect the Hamilton-Jacobi CFL limit (6.2). Heights are [m],
+times [s].
 """
 from __future__ import annotations
 
@@ -101,18 +106,40 @@ def inverse_latent_heat(melt: np.ndarray) -> np.ndarray:
     return melt / LATENT_HEAT_FUSION + (1.0 - melt) / LATENT_HEAT_SUBLIMATION
 
 
-def godunov_slope_factor(h: np.ndarray, spacing: float, max_slope_deg: float) -> tuple[np.ndarray, float]:
-    """Upwind sqrt(1 + |grad h|^2) for a surface receding along its normal (6.1), with the slope
-    clamped at ``max_slope_deg``. Returns the factor and the fraction of cells clamped."""
-    back_x = (h - np.roll(h, 1, axis=1)) / spacing
-    fwd_x = (np.roll(h, -1, axis=1) - h) / spacing
-    back_y = (h - np.roll(h, 1, axis=0)) / spacing
-    fwd_y = (np.roll(h, -1, axis=0) - h) / spacing
-    grad2 = (np.maximum(np.maximum(back_x, 0.0) ** 2, np.minimum(fwd_x, 0.0) ** 2)
-             + np.maximum(np.maximum(back_y, 0.0) ** 2, np.minimum(fwd_y, 0.0) ** 2))
+def face_mean(cell: np.ndarray, axis: int, step) -> np.ndarray:
+    """Mean of a cell field over the wall face between each cell and its neighbour ``step`` cells
+    along ``axis`` (+1 or -1, a scalar or one per cell): the trapezoid rule over the face's two ends."""
+    step = np.asarray(step)
+    neighbour = np.where(step > 0, np.roll(cell, -1, axis=axis), np.roll(cell, 1, axis=axis))
+    return 0.5 * (cell + neighbour)
+
+
+def _godunov_slopes(h: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Squared upwind slopes (x, y) of a receding surface (6.1) and the side (+1 east/north, -1
+    west/south) of the downhill neighbour each one is taken to."""
+    back_x = np.maximum((h - np.roll(h, 1, axis=1)) / spacing, 0.0) ** 2
+    fwd_x = np.minimum((np.roll(h, -1, axis=1) - h) / spacing, 0.0) ** 2
+    back_y = np.maximum((h - np.roll(h, 1, axis=0)) / spacing, 0.0) ** 2
+    fwd_y = np.minimum((np.roll(h, -1, axis=0) - h) / spacing, 0.0) ** 2
+    return (np.maximum(back_x, fwd_x), np.maximum(back_y, fwd_y),
+            np.where(back_x >= fwd_x, -1, 1), np.where(back_y >= fwd_y, -1, 1))
+
+
+def surface_inverse_latent_heat(h: np.ndarray, spacing: float, inverse_heat: np.ndarray,
+                                max_slope_deg: float) -> tuple[np.ndarray, float]:
+    """1/L_eff integrated over the surface a column exposes to sky and terrain light, per unit
+    horizontal area [kg J-1]. The surface is the upwind true area sqrt(1 + |grad h|^2) of a normal
+    recession (6.1), slope clamped at ``max_slope_deg``: its top (area 1) at the cell's own value,
+    the rest (its wall faces) at the face means with the downhill neighbours. Where 1/L_eff is
+    uniform this is 1/L_eff times the Godunov slope factor. Also returns the fraction of cells
+    whose slope hit the clamp."""
+    grad2_x, grad2_y, side_x, side_y = _godunov_slopes(h, spacing)
+    grad2 = grad2_x + grad2_y
     limit2 = np.tan(np.radians(max_slope_deg)) ** 2
-    clamped = grad2 > limit2
-    return np.sqrt(1.0 + np.minimum(grad2, limit2)), float(clamped.mean())
+    factor = np.sqrt(1.0 + np.minimum(grad2, limit2))
+    share_x = np.divide(grad2_x, grad2, out=np.full_like(h, 0.5), where=grad2 > 0)
+    faces = share_x * face_mean(inverse_heat, 1, side_x) + (1.0 - share_x) * face_mean(inverse_heat, 0, side_y)
+    return inverse_heat + (factor - 1.0) * faces, float(np.mean(grad2 > limit2))
 
 
 def sunward_slopes(h: np.ndarray, spacing: float, sun: np.ndarray, max_slope_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -136,6 +163,16 @@ def direct_beam_lowering(p: np.ndarray, q: np.ndarray, sun: np.ndarray) -> np.nd
     bottom as if the sun stood overhead and erase the sun-facing/shaded wall asymmetry.
     """
     return np.clip(sun[2] - sun[0] * p - sun[1] * q, 0.0, None)
+
+
+def direct_beam_mass(p: np.ndarray, q: np.ndarray, sun: np.ndarray, inverse_heat: np.ndarray) -> np.ndarray:
+    """direct_beam_lowering times 1/L_eff [kg J-1], with 1/L_eff integrated over what the beam hits:
+    s_z on the cell's top at its own value, -s_x p and -s_y q on the wall faces toward the sunward
+    neighbours (those the slopes p, q are taken to) at the face means. Zero where the beam misses."""
+    along_x = -sun[0] * p * face_mean(inverse_heat, 1, 1 if sun[0] >= 0 else -1)
+    along_y = -sun[1] * q * face_mean(inverse_heat, 0, 1 if sun[1] >= 0 else -1)
+    weighted = np.clip(sun[2] * inverse_heat + along_x + along_y, 0.0, None)
+    return np.where(direct_beam_lowering(p, q, sun) > 0.0, weighted, 0.0)
 
 
 def initial_height_field(n: int, spacing: float, rms: float, wavelength: float,
@@ -220,16 +257,17 @@ class GrowthResult:
 
 
 def _period_energy(h: np.ndarray, spacing: float, s: GrowthSettings, sun: sunpath.DailySun, chunk: np.ndarray,
-                   horizons: irradiance.Horizons) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+                   horizons: irradiance.Horizons, inverse_heat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Absorbed shortwave of one frozen-geometry period, split for the recession step.
 
-    Returns the direct beam per unit horizontal area and the sky + terrain light per unit true
-    area, both absorbed and net of the period's share of the loss to the sky [J m-2]; the gross
-    absorbed flux per unit true area [J m-2]; and the period's flux time [s] (time integral of the
-    horizontal incident flux over the reference flux).
+    Returns the direct beam per unit horizontal area, already weighted by 1/L_eff over the surface
+    it hits (direct_beam_mass) [kg m-2], and the sky + terrain light per unit true area [J m-2],
+    both absorbed and net of the period's share of the loss to the sky; the gross absorbed flux per
+    unit true area [J m-2]; and the period's flux time [s] (time integral of the horizontal
+    incident flux over the reference flux).
     """
     absorptance = 1.0 - s.albedo
-    direct_h = np.zeros_like(h)  # per horizontal area
+    direct_mass = np.zeros_like(h)  # per horizontal area, times 1/L_eff
     direct = np.zeros_like(h)  # per true area
     sky = np.zeros_like(h)
     flux_seconds = 0.0
@@ -239,16 +277,16 @@ def _period_energy(h: np.ndarray, spacing: float, s: GrowthSettings, sun: sunpat
         s_b, s_d = s.sky.direct_normal(elevation), s.sky.diffuse_horizontal(elevation)
         flux_seconds += duration * (s_b * np.sin(elevation) + s_d) / s.scattered_reference_flux
         p, q = sunward_slopes(h, spacing, vector, s.max_slope_deg)
-        beam = duration * s_b * irradiance.sun_visibility(h, spacing, vector) * direct_beam_lowering(p, q, vector)
-        direct_h += beam
-        direct += beam / np.sqrt(1.0 + p * p + q * q)
+        lit = duration * s_b * irradiance.sun_visibility(h, spacing, vector)
+        direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
+        direct += lit * direct_beam_lowering(p, q, vector) / np.sqrt(1.0 + p * p + q * q)
         sky += duration * s_d * horizons.sky_view
     terrain = irradiance.bounce_terrain_light(direct + sky, s.albedo, spacing, horizons, s.bounces)
     absorbed = absorptance * (direct + sky + terrain)
     # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
     share = float(sun.durations[chunk].sum() / sun.durations.sum())
     kept = net_energy_fraction(absorbed, s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view)
-    return absorptance * direct_h * kept, absorptance * (sky + terrain) * kept, absorbed, flux_seconds
+    return absorptance * direct_mass * kept, absorptance * (sky + terrain) * kept, absorbed, flux_seconds
 
 
 def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np.random.Generator,
@@ -272,19 +310,20 @@ def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np
             t0 = time.perf_counter()
             horizons = irradiance.compute_horizons(h, spacing, s.azimuths, rotation=rng.uniform(0, 2 * np.pi))
             t1 = time.perf_counter()
-            direct_h, diffuse, absorbed, flux_seconds = _period_energy(h, spacing, s, sun, chunk, horizons)
-            t2 = time.perf_counter()
             exposure = horizons.sky_view if s.switch_proxy == "sky_view" else horizons.openness
             melt = melt_fraction(exposure, s.switch_centre, s.switch_width) if s.melt_enabled else np.zeros_like(h)
-            lowering_per_energy = s.ablation_efficiency * inverse_latent_heat(melt) / s.density  # [m3 J-1]
+            inverse_heat = inverse_latent_heat(melt)
+            direct_mass, diffuse, absorbed, flux_seconds = _period_energy(h, spacing, s, sun, chunk, horizons, inverse_heat)
+            t2 = time.perf_counter()
+            volume_per_mass = s.ablation_efficiency / s.density  # [m3 kg-1]
             h_before = h.copy()
-            factor, clamped = godunov_slope_factor(h, spacing, s.max_slope_deg)
-            lowering = lowering_per_energy * (direct_h + diffuse * factor)
+            surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg)
+            lowering = volume_per_mass * (direct_mass + diffuse * surface_heat)
             substeps = max(1, int(np.ceil(float(np.max(lowering)) / (s.cfl * spacing))))
             for step in range(substeps):
                 if step:
-                    factor, clamped = godunov_slope_factor(h, spacing, s.max_slope_deg)
-                    lowering = lowering_per_energy * (direct_h + diffuse * factor)
+                    surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg)
+                    lowering = volume_per_mass * (direct_mass + diffuse * surface_heat)
                 h -= lowering / substeps
                 clamp_sum, clamp_count = clamp_sum + clamped, clamp_count + 1
             # Linear terms run on flux time, like A_B, so the selected band stays lambda* = 4 pi D / A_B.

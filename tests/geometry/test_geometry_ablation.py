@@ -1,5 +1,6 @@
 """Recession terms of the growth loop (penitentes.md 3.8, 3.9, 6.1): the upwinded direct beam, the
-loss to the sky, and the flux-time clock of the linear terms (lambda* = 4 pi D / A_B in a full run)."""
+loss to the sky, the flux-time clock of the linear terms (lambda* = 4 pi D / A_B in a full run), and
+the Lliboutry switch integrated over the wall faces a column stands for."""
 from pathlib import Path
 
 import numpy as np
@@ -7,6 +8,7 @@ import pytest
 import yaml
 
 from geometry import ablation, metrics, sunpath
+from pipeline.config import load_raw
 from pipeline.schema.geometry import GeometryConfig
 
 SITES = Path(__file__).resolve().parents[2] / "configs" / "presets" / "sites"
@@ -64,3 +66,56 @@ def test_lab_preset_grows_at_lambda_star():
     lambda_star = 4 * np.pi * cfg.diffusivity / cfg.scattered_light_coefficient
     assert metrics.dominant_wavelength(grown.height, cfg.spacing) == pytest.approx(lambda_star, rel=0.15)
     assert 5 < grown.height.std() / h0.std() < 500  # grows, but stays a lab-sized form
+
+
+def test_uniform_latent_heat_leaves_the_recession_as_it_was():
+    """Face means only matter where the switch varies: with one 1/L_eff everywhere the direct beam
+    and the Godunov factor come back unweighted."""
+    rng = np.random.default_rng(5)
+    spacing = 0.05
+    h = ablation.initial_height_field(32, spacing, 0.05, 0.4, rng)
+    sun = _sun(40.0, 110.0)
+    inverse_heat = np.full_like(h, 1.0 / ablation.LATENT_HEAT_SUBLIMATION)
+    p, q = ablation.sunward_slopes(h, spacing, sun, 85.0)
+    np.testing.assert_allclose(ablation.direct_beam_mass(p, q, sun, inverse_heat),
+                               ablation.direct_beam_lowering(p, q, sun) * inverse_heat, rtol=1e-12)
+    dx_back, dx_fwd = (h - np.roll(h, 1, 1)) / spacing, (np.roll(h, -1, 1) - h) / spacing
+    dy_back, dy_fwd = (h - np.roll(h, 1, 0)) / spacing, (np.roll(h, -1, 0) - h) / spacing
+    grad2 = (np.maximum(np.maximum(dx_back, 0) ** 2, np.minimum(dx_fwd, 0) ** 2)
+             + np.maximum(np.maximum(dy_back, 0) ** 2, np.minimum(dy_fwd, 0) ** 2))
+    surface, _ = ablation.surface_inverse_latent_heat(h, spacing, inverse_heat, 89.0)
+    np.testing.assert_allclose(surface, inverse_heat * np.sqrt(1 + grad2), rtol=1e-12)
+
+
+def test_one_cell_crest_melts_its_sunlit_face_at_the_face_mean():
+    """A sublimating one-cell N-S wall 1 m above a melting floor, sun from the east: the top takes
+    s_z at L_s, the east face -s_x p at the mean of its ends (the crest sublimates, the foot melts)."""
+    n, spacing = 16, 0.1
+    h = np.zeros((n, n))
+    h[:, n // 2] = 1.0
+    melt = np.where(h > 0.5, 0.0, 1.0)
+    inverse_heat = ablation.inverse_latent_heat(melt)
+    sun = _sun(50.0, 90.0)
+    p, q = ablation.sunward_slopes(h, spacing, sun, 89.0)
+    crest = ablation.direct_beam_mass(p, q, sun, inverse_heat)[0, n // 2]
+    l_s, l_f = ablation.LATENT_HEAT_SUBLIMATION, ablation.LATENT_HEAT_FUSION
+    expected = sun[2] / l_s + sun[0] * (1.0 / spacing) * 0.5 * (1 / l_s + 1 / l_f)
+    assert crest == pytest.approx(expected, rel=1e-12)
+
+
+def test_thin_north_south_walls_fall_and_east_west_walls_stand():
+    """Cathles et al. 2014 / Warren 2023 on a grid of square pits (0.8 m deep, 0.81 m apart) walled by
+    one-cell walls both ways, Tapado for 8 days from 25 Nov: the morning and evening sun on the N-S
+    walls' faces brings them down to the floor while the E-W walls keep and gain their height."""
+    cfg = GeometryConfig(**{**load_raw(SITES / "tapado.yaml")["geometry"],
+                            "grid_cells": 64, "domain_size": 4.0, "days": 8, "snapshots": 2})
+    n, period = cfg.grid_cells, 13
+    h = np.full((n, n), -0.8)
+    h[::period, :] = 0.0  # E-W walls
+    h[:, ::period] = 0.0  # N-S walls
+    grown = ablation.grow_field(h, cfg.spacing, ablation.settings_from_config(cfg), np.random.default_rng(0)).height
+    wall, middle = np.arange(n) % period == 0, np.arange(n) % period == period // 2
+    east_west = grown[wall][:, ~wall].mean() - grown[middle][:, ~wall].mean()
+    north_south = grown[:, wall][~wall].mean() - grown[:, middle][~wall].mean()
+    assert north_south < 0.2
+    assert east_west > 0.8
