@@ -27,17 +27,96 @@ def radial_power_spectrum(h: np.ndarray, spacing: float) -> tuple[np.ndarray, np
     return np.arange(nbins) * k1, mean
 
 
-def dominant_wavelength(h: np.ndarray, spacing: float) -> float:
-    """Wavelength [m] at the peak of the radially averaged spectrum, refined by a parabola in log power."""
-    k, power = radial_power_spectrum(h, spacing)
-    i = int(np.argmax(power[1:]) + 1)
+def _peak_wavelength(k: np.ndarray, power: np.ndarray, first: int) -> float:
+    """Wavelength [m] at the largest of power[first:], refined by a parabola in log power."""
+    i = int(np.argmax(power[first:]) + first)
     peak = float(i)
-    if 1 < i < len(power) - 1 and np.all(power[i - 1:i + 2] > 0):
+    if first <= i - 1 and i + 1 < len(power) and np.all(power[i - 1:i + 2] > 0):
         a, b, c = np.log(power[i - 1:i + 2])
         denom = a - 2.0 * b + c
         if denom < 0:
             peak = i + 0.5 * (a - c) / denom
     return float(2.0 * np.pi / (peak * k[1]))
+
+
+def dominant_wavelength(h: np.ndarray, spacing: float) -> float:
+    """Wavelength [m] at the peak of the radially averaged spectrum, refined by a parabola in log power
+    (V1: an isotropic band selected by A_B and D)."""
+    k, power = radial_power_spectrum(h, spacing)
+    return _peak_wavelength(k, power, 1)
+
+
+def transect_power_spectrum(h: np.ndarray, spacing: float, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Mean power spectrum of the grid's straight transects along ``axis`` (0: north-south columns,
+    1: east-west rows), each less its own mean: (k [rad m-1] at 0, k_1, ..., (n/2) k_1; power per
+    bin [m2], one-sided, so that it sums to the mean transect variance)."""
+    profiles = np.moveaxis(np.asarray(h, float), axis, 0)
+    n = profiles.shape[0]
+    spectrum = np.abs(np.fft.rfft(profiles - profiles.mean(axis=0), axis=0)) ** 2 / n**2
+    power = spectrum.reshape(spectrum.shape[0], -1).mean(axis=1)
+    power[1:(n + 1) // 2] *= 2.0  # fold in the negative wavenumbers
+    return np.arange(power.size) * 2.0 * np.pi / (n * spacing), power
+
+
+def row_spacing(h: np.ndarray, spacing: float) -> float:
+    """lambda_dom of V3 for east-west rows [m]: the wavelength at the peak of the north-south
+    transect spectrum (penitentes.md 7 allows it in place of the radial average), refined by a
+    parabola in log power.
+
+    Across E-W rows the N-S spectrum holds the rows' power on every transect, where the radial
+    average spreads it over a ring that is empty away from the k_y axis. The search starts at L/2:
+    a spacing is a repeat, and the one cycle of the fundamental (lambda = L) is not one. That bin
+    holds the mean-height undulation between more and less developed patches, and the domain is
+    meant to hold 8-16 spacings (penitentes.md 4), not one. Grown fields have a broad N-S spectrum,
+    nearly flat from the crest spacing up to the domain, so the peak moves from seed to seed;
+    crest_spacing is the steadier figure.
+    """
+    k, power = transect_power_spectrum(h, spacing, axis=0)
+    if power.size < 4:
+        raise ValueError(f"row spacing needs a grid of at least 6 cells per side, got {h.shape}")
+    return _peak_wavelength(k, power, 2)
+
+
+def _mean_crossing_stretches(profile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Crests (highest point of each stretch above the profile's mean) and troughs (lowest of each
+    stretch below it) of one periodic profile, as deviations from its mean [m]."""
+    deviation = profile - profile.mean()
+    above = deviation > 0
+    starts = np.flatnonzero(above != np.roll(above, 1))
+    if starts.size < 2:
+        return np.zeros(0), np.zeros(0)
+    deviation, above, starts = np.roll(deviation, -starts[0]), np.roll(above, -starts[0]), starts - starts[0]
+    crest_stretch = above[starts]
+    return (np.maximum.reduceat(deviation, starts)[crest_stretch],
+            np.minimum.reduceat(deviation, starts)[~crest_stretch])
+
+
+def _transects(h: np.ndarray, axis: int) -> np.ndarray:
+    profiles = np.moveaxis(np.asarray(h, float), axis, 0)
+    return profiles.reshape(profiles.shape[0], -1).T
+
+
+def crest_to_trough(h: np.ndarray, axis: int = 0) -> float:
+    """H of V3: mean crest-to-trough relief along the transects of ``axis`` (0: north-south) [m].
+
+    Each transect is cut where it crosses its own mean; the highest point of a stretch above the
+    mean is a crest, the lowest of a stretch below it a trough. H is the mean crest less the mean
+    trough, averaged over transects. For a sinusoid it is 2 x amplitude, as 2 sqrt 2 RMS is
+    (relief); for thin blades between wide flat troughs it stays the blade height, where
+    2 sqrt 2 RMS falls short, and for flat-topped walls it does not overshoot as RMS does.
+    """
+    heights = [crests.mean() - troughs.mean() for crests, troughs in map(_mean_crossing_stretches, _transects(h, axis))
+               if crests.size]
+    return float(np.mean(heights)) if heights else 0.0
+
+
+def crest_spacing(h: np.ndarray, spacing: float, axis: int = 0) -> float:
+    """Mean distance between successive crests along the transects of ``axis`` (0: north-south) [m]:
+    transect length over its number of crests (as in crest_to_trough). A check on row_spacing that
+    needs no spectral peak; it is inf where no transect crosses its mean."""
+    counts = [crests.size for crests, _ in map(_mean_crossing_stretches, _transects(h, axis))]
+    mean_count = float(np.mean(counts))
+    return h.shape[axis] * spacing / mean_count if mean_count > 0 else float("inf")
 
 
 def ridge_orientation(h: np.ndarray, spacing: float) -> dict:
@@ -77,7 +156,8 @@ def lean(h: np.ndarray, spacing: float, steep_deg: float = 30.0, sector_deg: flo
 
 
 def relief(h: np.ndarray) -> dict:
-    """RMS height, crest-to-trough relief (2 sqrt 2 RMS, penitentes.md V3) and the 1-99 % range [m]."""
+    """RMS height, the relief 2 sqrt 2 RMS (crest to trough of near-sinusoidal rows, penitentes.md V3)
+    and the 1-99 % range [m]."""
     rms = float(np.std(h))
     lo, hi = np.percentile(h, [1, 99])
     return {"rms_height_m": rms, "relief_m": 2.0 * np.sqrt(2.0) * rms, "range_1_99_m": float(hi - lo)}
@@ -93,10 +173,15 @@ def aspect_histogram(h: np.ndarray, spacing: float, bins: int = 36, steep_deg: f
 
 
 def morphology(h: np.ndarray, spacing: float) -> dict:
-    """All shape metrics of one field in a flat dict."""
+    """All shape metrics of one field in a flat dict. spacing_to_height is V3's lambda_dom / H with
+    lambda_dom = row_spacing and H = crest_to_trough (both across the rows, north-south)."""
     out = relief(h)
+    out["crest_to_trough_m"] = crest_to_trough(h, axis=0)
+    out["row_spacing_m"] = row_spacing(h, spacing)
+    out["crest_spacing_m"] = crest_spacing(h, spacing, axis=0)
     out["dominant_wavelength_m"] = dominant_wavelength(h, spacing)
     out.update(ridge_orientation(h, spacing))
     out.update(lean(h, spacing))
-    out["spacing_to_height"] = out["dominant_wavelength_m"] / out["relief_m"] if out["relief_m"] > 0 else float("inf")
+    height = out["crest_to_trough_m"]
+    out["spacing_to_height"] = out["row_spacing_m"] / height if height > 0 else float("inf")
     return out

@@ -45,11 +45,12 @@ def save_hillshade(path: Path, h: np.ndarray, spacing: float, width_px: int, tit
 
 
 def save_metrics_plot(path: Path, h: np.ndarray, spacing: float, relief_history: np.ndarray, summary: dict) -> None:
-    """Four panels: relief against time, radial spectrum, aspect rose of steep facets, slope histogram."""
+    """Four panels: relief against time, N-S and radial spectra, aspect rose of steep facets, slope histogram."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig = plt.figure(figsize=(11, 8))
     ax = fig.add_subplot(2, 2, 1)
@@ -58,13 +59,16 @@ def save_metrics_plot(path: Path, h: np.ndarray, spacing: float, relief_history:
     ax.set_ylabel("relief 2√2·RMS [m]")
     ax.set_title("relief growth")
     ax = fig.add_subplot(2, 2, 2)
+    k, power = metrics.transect_power_spectrum(h, spacing, axis=0)
+    ax.loglog(2 * np.pi / k[1:], power[1:], label="N–S transects")
     k, power = metrics.radial_power_spectrum(h, spacing)
-    ax.loglog(2 * np.pi / k[1:], power[1:])
-    ax.axvline(summary["dominant_wavelength_m"], color="r", ls="--", label=f"λ = {summary['dominant_wavelength_m']:.2f} m")
+    ax.loglog(2 * np.pi / k[1:], power[1:], color="0.6", label="radial average")
+    ax.axvline(summary["row_spacing_m"], color="r", ls="--", label=f"λ_dom = {summary['row_spacing_m']:.2f} m")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # labels on every minor tick overlap
     ax.set_xlabel("wavelength [m]")
-    ax.set_ylabel("radial power")
+    ax.set_ylabel("power per bin [m²]")
     ax.legend()
-    ax.set_title("power spectrum")
+    ax.set_title(f"power spectrum: λ_dom / H = {summary['spacing_to_height']:.2f} (H {summary['crest_to_trough_m']:.2f} m)")
     ax = fig.add_subplot(2, 2, 3, projection="polar")
     edges, frac = metrics.aspect_histogram(h, spacing)
     ax.set_theta_zero_location("N")

@@ -102,10 +102,13 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     timings["total_s"] = time.perf_counter() - t0
     write_json_atomic(out_dir / "metrics.json", {"metrics": summary_metrics, "timings_s": timings,
                                                   "relief_history_m": (2 * np.sqrt(2) * grown.relief_history).tolist()})
-    log.info("geometry: relief %.2f m, wavelength %.2f m, %d triangles in %.1f s", summary_metrics["relief_m"],
-             summary_metrics["dominant_wavelength_m"], len(solid.faces), timings["total_s"])
+    log.info("geometry: crest-to-trough %.2f m, row spacing %.2f m (ratio %.2f), %d triangles in %.1f s",
+             summary_metrics["crest_to_trough_m"], summary_metrics["row_spacing_m"], summary_metrics["spacing_to_height"],
+             len(solid.faces), timings["total_s"])
     return {
-        "relief_m": summary_metrics["relief_m"], "dominant_wavelength_m": summary_metrics["dominant_wavelength_m"],
+        "relief_m": summary_metrics["relief_m"], "crest_to_trough_m": summary_metrics["crest_to_trough_m"],
+        "row_spacing_m": summary_metrics["row_spacing_m"], "spacing_to_height": summary_metrics["spacing_to_height"],
+        "dominant_wavelength_m": summary_metrics["dominant_wavelength_m"],
         "ridge_deviation_from_east_west_deg": summary_metrics["ridge_deviation_from_east_west_deg"],
         "lean_north_deg": summary_metrics["lean_north_deg"], "field_albedo": summary_metrics["field_albedo"],
         "triangles": int(len(solid.faces)), "timings_s": {k: round(v, 3) for k, v in timings.items()},

@@ -7,10 +7,10 @@ import av
 import numpy as np
 import pydantic
 import pytest
-import yaml
 
 from geometry import mesh
 from geometry.stage import run_geometry_stage
+from pipeline.config import load_raw
 from pipeline.schema.geometry import GeometryConfig
 
 SITES = Path(__file__).resolve().parents[2] / "configs" / "presets" / "sites"
@@ -60,7 +60,7 @@ def test_initial_wavelength_must_be_resolved():
 def test_site_presets_validate(preset):
     text = (SITES / preset).read_text()
     assert text.startswith("# ")
-    GeometryConfig(**yaml.safe_load(text)["geometry"])
+    GeometryConfig(**load_raw(SITES / preset)["geometry"])
 
 
 def test_stage_writes_every_output(tmp_path):

@@ -1,0 +1,56 @@
+"""V3 spacing and height metrics (penitentes.md 7) on fields whose answer is known by construction."""
+import numpy as np
+import pytest
+
+from geometry import metrics
+
+N, L = 64, 4.0
+SPACING = L / N
+Y = np.arange(N) * SPACING
+
+
+def _rows(profile: np.ndarray) -> np.ndarray:
+    """East-west rows: the same north-south profile in every column."""
+    return np.repeat(profile[:, None], N, axis=1)
+
+
+def test_sinusoidal_rows_on_a_domain_scale_undulation():
+    """0.8 m rows of 0.3 m amplitude on a 5 cm undulation of the domain scale: lambda_dom is the rows',
+    H is 2 x amplitude (within the sampling of the crests), as 2 sqrt 2 RMS is for a sinusoid."""
+    h = _rows(0.3 * np.cos(2 * np.pi * Y / 0.8) + 0.05 * np.cos(2 * np.pi * Y / L))
+    assert metrics.row_spacing(h, SPACING) == pytest.approx(0.8, rel=0.01)
+    assert metrics.crest_to_trough(h) == pytest.approx(0.6, rel=0.02)
+    assert metrics.relief(h)["relief_m"] == pytest.approx(0.6, rel=0.02)
+
+
+def test_thin_blades_keep_their_height():
+    """One-cell blades 1 m tall every 8 cells (0.5 m) on flat troughs: H is the blade height, where
+    2 sqrt 2 RMS falls short, and the spacing is the blades'."""
+    profile = np.zeros(N)
+    profile[::8] = 1.0
+    h = _rows(profile)
+    assert metrics.crest_to_trough(h) == pytest.approx(1.0)
+    assert metrics.relief(h)["relief_m"] < 0.95
+    assert metrics.row_spacing(h, SPACING) == pytest.approx(0.5, rel=0.01)
+    assert metrics.morphology(h, SPACING)["spacing_to_height"] == pytest.approx(0.5, rel=0.01)
+
+
+def test_north_south_rows_have_no_height_across_east_west_rows():
+    """Ridges running north-south leave every north-south transect flat: no E-W rows to measure."""
+    h = _rows(np.zeros(N)) + 0.3 * np.cos(2 * np.pi * Y / 0.8)[None, :]
+    assert metrics.crest_to_trough(h, axis=0) == 0.0
+    assert metrics.crest_to_trough(h, axis=1) == pytest.approx(0.6, rel=0.02)
+
+
+def test_transect_spectrum_sums_to_the_transect_variance():
+    h = np.random.default_rng(3).standard_normal((N, N))
+    _, power = metrics.transect_power_spectrum(h, SPACING)
+    assert power.sum() == pytest.approx(h.var(axis=0).mean(), rel=1e-12)
+
+
+def test_crest_spacing_counts_the_blades():
+    profile = np.zeros(N)
+    profile[::8] = 1.0
+    assert metrics.crest_spacing(_rows(profile), SPACING) == pytest.approx(0.5)
+    assert metrics.crest_spacing(_rows(np.cos(2 * np.pi * Y / 0.8)), SPACING) == pytest.approx(0.8)
+    assert metrics.crest_spacing(np.ones((N, N)), SPACING) == float("inf")
