@@ -2,7 +2,7 @@
 
 Run: .venv/bin/python benchmarks/bench_geometry.py
 Writes benchmarks/results/geometry.csv and geometry.md. The 128^2 row is the demo setting
-(Tapado defaults, 40 days). Larger grids keep the demo's 6.25 cm spacing on a larger domain and
+(the Tapado site preset, 40 days). Larger grids keep the demo's 6.25 cm spacing on a larger domain and
 simulate fewer days to keep the run to a few minutes; per-day time is the comparable column.
 Pictures are excluded (their cost does not depend on the grid: ~4 s).
 """
@@ -20,13 +20,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from geometry import ablation, mesh, metrics  # noqa: E402
 from pipeline.atomic import write_text_atomic  # noqa: E402
+from pipeline.config import load_raw  # noqa: E402
 from pipeline.schema.geometry import GeometryConfig  # noqa: E402
 
 CASES = [(128, 40), (256, 4), (512, 1)]  # (grid cells per side, simulated days)
+TAPADO = Path(__file__).resolve().parents[1] / "configs" / "presets" / "sites" / "tapado.yaml"
 
 
 def bench(cells: int, days: int) -> dict:
-    cfg = GeometryConfig(grid_cells=cells, domain_size=cells * 0.0625, days=days, snapshots=2)
+    site = load_raw(TAPADO)["geometry"]
+    cfg = GeometryConfig(**{**site, "grid_cells": cells, "domain_size": cells * 0.0625, "days": days, "snapshots": 2})
     rng = np.random.default_rng(1)
     t0 = time.perf_counter()
     h0 = ablation.initial_height_field(cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
