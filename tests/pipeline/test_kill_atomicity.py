@@ -15,31 +15,10 @@ from pathlib import Path
 
 import pytest
 
+from block_scene import block_config
 from pipeline.manifest import outputs_intact, read_manifest
 from pipeline.paths import PROJECT_ROOT
 
-# A box of snow-like medium under a directional sun, no reference, a small render that saves a
-# checkpoint after every iteration: a whole run takes about 3 s on 2 cores, a third of it rendering.
-CONFIG = """
-name: killed
-seed: 3
-threads: 2
-runs_dir: {runs}
-scene:
-  media:
-    snow: {{coefficients: {{sigma_s: [3.0, 2.5, 2.0], sigma_a: [0.3, 0.1, 0.05], g: 0.0}}}}
-  objects:
-    - {{name: block, shape: box, medium: snow, center: [0, 0, -0.5], size: [2, 2, 1]}}
-  camera: {{placement: look_at, origin: [0, -4, 3], target: [0, 0, -0.3], width: 24, height: 16, fov: 45}}
-  sun: {{kind: directional, elevation_deg: 60, azimuth_deg: 30, irradiance: 100.0}}
-  sky: {{radiance: 0.0}}
-  film: {{mode: transient, temporal_bins: 12, frame_mode: bins, window: auto, window_tail_opl: 1.0}}
-  max_depth: 16
-reference: {{steady: false, transient: false}}
-render: {{iterations: 24, snapshot_every: 4, light_paths_per_iteration: 6000, checkpoint_every_iterations: 1,
-          initial_beam_radius: {{value: 0.03, unit: m}}}}
-composite: {{video_min_height: 64}}
-"""
 STAGES = ("scene", "render", "composite", "compare")
 
 
@@ -91,7 +70,12 @@ def kill_and_check(config: Path, run: Path, kills: int, rng: random.Random, full
 def run_kill_test(tmp_path: Path, kills: int, seed: int) -> dict:
     runs = tmp_path / "runs"
     config = tmp_path / "killed.yaml"
-    config.write_text(CONFIG.format(runs=runs))
+    # No reference, and a small render that saves a checkpoint after every iteration: a whole run
+    # takes about 3 s on 2 cores, a third of it rendering.
+    config.write_text(block_config(
+        runs, name="killed", seed=3, reference={"steady": False, "transient": False},
+        render={"iterations": 24, "snapshot_every": 4, "light_paths_per_iteration": 6000,
+                "checkpoint_every_iterations": 1}))
     run = runs / "killed"
     t0 = time.perf_counter()
     first = subprocess.run(pipeline_command(config), cwd=tmp_path, capture_output=True, text=True, timeout=300,

@@ -8,36 +8,18 @@ import json
 import numpy as np
 import pytest
 
+from block_scene import block_config
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
 from render.video import probe_mp4
 
-CONFIG = """
-name: tiny
-seed: 3
-threads: 2
-runs_dir: {runs}
-scene:
-  media:
-    snow: {{coefficients: {{sigma_s: [3.0, 2.5, 2.0], sigma_a: [0.3, 0.1, 0.05], g: 0.0}}}}
-  objects:
-    - {{name: block, shape: box, medium: snow, center: [0, 0, -0.5], size: [2, 2, 1]}}
-  camera: {{placement: look_at, origin: [0, -4, 3], target: [0, 0, -0.3], width: 24, height: 16, fov: 45}}
-  sun: {{kind: directional, elevation_deg: 60, azimuth_deg: 30, irradiance: 100.0}}
-  sky: {{radiance: 0.0}}
-  film: {{mode: transient, temporal_bins: 12, frame_mode: bins, window: auto, window_tail_opl: 1.0}}
-  max_depth: 16
-reference: {{spp: 256, transient_spp: 256, spp_per_pass: 128}}
-render: {{iterations: 12, snapshot_every: 4, light_paths_per_iteration: 6000, initial_beam_radius: {{value: 0.03, unit: m}}}}
-composite: {{video_min_height: 64}}
-"""
-
-
 @pytest.mark.mitsuba
 def test_every_stage_runs_and_agrees_with_the_reference(tmp_path):
     config_file = tmp_path / "tiny.yaml"
-    config_file.write_text(CONFIG.format(runs=tmp_path / "runs"))
+    config_file.write_text(block_config(
+        tmp_path / "runs", name="tiny", seed=3, reference={"spp": 256, "transient_spp": 256, "spp_per_pass": 128},
+        render={"iterations": 12, "snapshot_every": 4, "light_paths_per_iteration": 6000}))
     cfg = load_config(config_file)
     results = run_stages(cfg, STAGES, quiet=True)
     status = {r.name: r.status for r in results}

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from block_scene import block_config
 from pipeline.config import load_config
 from pipeline.runner import Stage, checkpoint_dir, run_stages
 
@@ -51,28 +52,6 @@ def test_checkpoint_folder_is_kept_only_for_resume_and_removed_once_published(co
     assert (tmp_path / "runs" / "toy" / "work" / "done.txt").exists()
 
 
-CONFIG = """
-name: resumed
-seed: 5
-threads: 2
-runs_dir: {runs}
-scene:
-  media:
-    snow: {{coefficients: {{sigma_s: [3.0, 2.5, 2.0], sigma_a: [0.3, 0.1, 0.05], g: 0.3}}}}
-  objects:
-    - {{name: block, shape: box, medium: snow, center: [0, 0, -0.5], size: [2, 2, 1]}}
-  camera: {{placement: look_at, origin: [0, -4, 3], target: [0, 0, -0.3], width: 20, height: 14, fov: 45}}
-  sun: {{kind: directional, elevation_deg: 60, azimuth_deg: 30, irradiance: 100.0}}
-  sky: {{radiance: 0.0}}
-  film: {{mode: transient, temporal_bins: 10, frame_mode: bins, window: auto, window_tail_opl: 1.0}}
-  max_depth: 16
-reference: {{steady: false, transient: false}}
-render: {{iterations: 80, snapshot_every: 10, light_paths_per_iteration: 1000, checkpoint_every_iterations: 5,
-          frame_mode: gate, initial_beam_radius: {{value: 0.03, unit: m}}}}
-composite: {{video_min_height: 64}}
-"""
-
-
 def cli(config: Path, *args: str, **kwargs) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "pipeline", "run", str(config), "--quiet", "--stage", "scene",
                            "--stage", "render", *args], cwd=config.parent, capture_output=True, text=True, timeout=300,
@@ -85,7 +64,11 @@ def digest(path: Path) -> str:
 
 def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path):
     config = tmp_path / "resumed.yaml"
-    config.write_text(CONFIG.format(runs=tmp_path / "runs"))
+    config.write_text(block_config(
+        tmp_path / "runs", name="resumed", seed=5, g=0.3, width=20, height=14, bins=10,
+        reference={"steady": False, "transient": False},
+        render={"iterations": 80, "snapshot_every": 10, "light_paths_per_iteration": 1000,
+                "checkpoint_every_iterations": 5, "frame_mode": "gate"}))
     run = tmp_path / "runs" / "resumed"
     checkpoint = run / ".render.checkpoint" / "checkpoint.npz"
     process = subprocess.Popen([sys.executable, "-m", "pipeline", "run", str(config), "--quiet", "--stage", "scene",

@@ -9,6 +9,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "ptpb/kernels.hpp"
@@ -211,57 +212,43 @@ RenderSettings parse_settings(const py::dict& d) {
   return s;
 }
 
-// RenderStats under the names of the result's "stats" dict; a resume state carries the same dict.
+// Visits every RenderStats field that a result's "stats" dict and a resume state carry, with its
+// dict key: one list for both directions.
+template <typename Stats, typename Visit>
+void for_each_stat(Stats& s, Visit&& visit) {
+  visit("iterations", s.iterations_done);
+  visit("light_paths", s.light_paths);
+  visit("beams", s.beams);
+  visit("queries", s.queries);
+  visit("candidates", s.candidates);
+  visit("pair_evaluations", s.pair_evaluations);
+  visit("parallel_rejected", s.parallel_rejected);
+  visit("false_positives", s.false_positives);
+  visit("accel_references", s.accel_references);
+  visit("time_light_s", s.time_light_s);
+  visit("time_build_s", s.time_build_s);
+  visit("time_camera_s", s.time_camera_s);
+  visit("time_total_s", s.time_total_s);
+  visit("final_radius", s.final_radius);
+  visit("final_time_half_width", s.final_time_half_width);
+  visit("surface_photons", s.surface_photons);
+  visit("surface_queries", s.surface_queries);
+  visit("surface_pairs", s.surface_pairs);
+  visit("time_surface_build_s", s.time_surface_build_s);
+  visit("final_surface_radius", s.final_surface_radius);
+  visit("final_surface_time_half_width", s.final_surface_time_half_width);
+}
+
 py::dict stats_dict(const RenderStats& s) {
   py::dict st;
-  st["iterations"] = s.iterations_done;
-  st["light_paths"] = s.light_paths;
-  st["beams"] = s.beams;
-  st["queries"] = s.queries;
-  st["candidates"] = s.candidates;
-  st["pair_evaluations"] = s.pair_evaluations;
-  st["parallel_rejected"] = s.parallel_rejected;
-  st["false_positives"] = s.false_positives;
-  st["accel_references"] = s.accel_references;
-  st["time_light_s"] = s.time_light_s;
-  st["time_build_s"] = s.time_build_s;
-  st["time_camera_s"] = s.time_camera_s;
-  st["time_total_s"] = s.time_total_s;
-  st["final_radius"] = s.final_radius;
-  st["final_time_half_width"] = s.final_time_half_width;
-  st["surface_photons"] = s.surface_photons;
-  st["surface_queries"] = s.surface_queries;
-  st["surface_pairs"] = s.surface_pairs;
-  st["time_surface_build_s"] = s.time_surface_build_s;
-  st["final_surface_radius"] = s.final_surface_radius;
-  st["final_surface_time_half_width"] = s.final_surface_time_half_width;
+  for_each_stat(s, [&](const char* key, const auto& value) { st[key] = value; });
   return st;
 }
 
 RenderStats parse_stats(const py::dict& d) {
   const std::string w = "resume.stats";
   RenderStats s;
-  s.iterations_done = require_key<int>(d, "iterations", w);
-  s.light_paths = require_key<std::uint64_t>(d, "light_paths", w);
-  s.beams = require_key<std::uint64_t>(d, "beams", w);
-  s.queries = require_key<std::uint64_t>(d, "queries", w);
-  s.candidates = require_key<std::uint64_t>(d, "candidates", w);
-  s.pair_evaluations = require_key<std::uint64_t>(d, "pair_evaluations", w);
-  s.parallel_rejected = require_key<std::uint64_t>(d, "parallel_rejected", w);
-  s.false_positives = require_key<std::uint64_t>(d, "false_positives", w);
-  s.accel_references = require_key<std::uint64_t>(d, "accel_references", w);
-  s.time_light_s = require_key<double>(d, "time_light_s", w);
-  s.time_build_s = require_key<double>(d, "time_build_s", w);
-  s.time_camera_s = require_key<double>(d, "time_camera_s", w);
-  s.time_total_s = require_key<double>(d, "time_total_s", w);
-  s.final_radius = require_key<double>(d, "final_radius", w);
-  s.final_time_half_width = require_key<double>(d, "final_time_half_width", w);
-  s.surface_photons = require_key<std::uint64_t>(d, "surface_photons", w);
-  s.surface_queries = require_key<std::uint64_t>(d, "surface_queries", w);
-  s.surface_pairs = require_key<std::uint64_t>(d, "surface_pairs", w);
-  s.time_surface_build_s = require_key<double>(d, "time_surface_build_s", w);
-  s.final_surface_radius = require_key<double>(d, "final_surface_radius", w);
-  s.final_surface_time_half_width = require_key<double>(d, "final_surface_time_half_width", w);
+  for_each_stat(s, [&](const char* key, auto& value) { value = require_key<std::decay_t<decltype(value)>>(d, key, w); });
   return s;
 }
 
@@ -365,7 +352,7 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
   ProgressCallback cb = [&](const Progress& p) {
     py::gil_scoped_acquire gil;
     if (PyErr_CheckSignals() != 0) {
-      // Ctrl-C: stop after the last complete iteration and return what we have.
+      // Ctrl-C: stop once the iteration under way is complete and return what we have.
       if (PyErr_ExceptionMatches(PyExc_KeyboardInterrupt)) {
         PyErr_Clear();
         interrupted = true;

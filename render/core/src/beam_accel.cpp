@@ -286,6 +286,7 @@ constexpr std::uintptr_t kLeafTag = 1;
 constexpr std::uintptr_t kLeafCountMask = 0xE;
 constexpr unsigned kMaxLeafPieces = 8;
 constexpr unsigned kLeafSize = 2;  // the builder's largest leaf: 2 beat 1, 4 and 8 by 6-15 % (camera pass)
+static_assert(kLeafSize <= kMaxLeafPieces, "a leaf's count must fit its pointer's tag bits");
 
 void* create_node(RTCThreadLocalAllocator alloc, unsigned int /*children*/, void* /*user*/) {
   auto* node = static_cast<Node4*>(rtcThreadLocalAlloc(alloc, sizeof(Node4), alignof(Node4)));

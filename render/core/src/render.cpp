@@ -135,11 +135,6 @@ void validate_resume(const RenderState& st, const Scene& scene, const RenderSett
               " iterations differ from this schedule's (initial radii, time half-widths, alpha or frame mode changed)");
 }
 
-struct Counters {
-  std::atomic<std::uint64_t> queries{0}, candidates{0}, pairs{0}, parallel{0}, false_positives{0};
-  std::atomic<std::uint64_t> surface_queries{0}, surface_pairs{0};
-};
-
 // Everything one iteration's camera pass needs, read-only.
 struct CameraPass {
   const CompiledScene* cs;
@@ -160,15 +155,16 @@ struct CameraPass {
 // into it and then adds it to the shared sums (TileFilm::flush), which leaves it zeroed for the next
 // tile. Only frames [kmin, kmax] can be non-zero.
 struct TileFilm {
-  int side = 0, frames = 0;
+  int side = 0;
   std::size_t plane = 0;  // values per plane
   std::vector<double> values;
   int kmin = std::numeric_limits<int>::max(), kmax = -1;
-  int x0 = 0, y0 = 0;
+  int x0 = 0, y0 = 0, w = 0, h = 0;  // the film pixels the tile holds now
 
   TileFilm(int tile_size, int frame_count)
-      : side(tile_size), frames(frame_count), plane(std::size_t(tile_size) * tile_size * 3),
+      : side(tile_size), plane(std::size_t(tile_size) * tile_size * 3),
         values(plane * (3 + std::size_t(frame_count)), 0.0) {}
+  void place(int x, int y, int width, int height) { x0 = x; y0 = y; w = width; h = height; }
   double* steady(std::size_t local) { return values.data() + 3 * local; }
   double* early(std::size_t local) { return values.data() + plane + 3 * local; }
   double* late(std::size_t local) { return values.data() + 2 * plane + 3 * local; }
@@ -178,10 +174,11 @@ struct TileFilm {
     return values.data() + (3 + std::size_t(k)) * plane + 3 * local;
   }
 
-  // Adds the tile's pixels (the w x h at x0, y0 of a W-wide film) to the sums and zeroes them. The
-  // double sums take a plain add; the float frame sums take one rounding of (sum + value), or, with
-  // remainders, the new (sum, remainder) pair of sum + remainder + value.
-  void flush(RenderState& st, int W, int w, int h) {
+  // Adds the tile's pixels to the sums and zeroes them. The double sums take a plain add; the float
+  // frame sums take one rounding of (sum + value), or, with remainders, the new (sum, remainder)
+  // pair of sum + remainder + value.
+  void flush(RenderState& st) {
+    const int W = st.width;
     const std::size_t px3 = std::size_t(W) * st.height * 3;
     double* planes[3] = {st.steady.data(), st.early.data(), st.late.data()};
     for (int q = 0; q < 3; ++q)
@@ -278,6 +275,17 @@ struct PixelSplat {
 struct TileStats {
   std::uint64_t queries = 0, candidates = 0, pairs = 0, parallel = 0, false_positives = 0;
   std::uint64_t surface_queries = 0, surface_pairs = 0;
+
+  // Integer totals: the order in which tiles add them does not matter.
+  void add_to(RenderStats& s) const {
+    s.queries += queries;
+    s.candidates += candidates;
+    s.pair_evaluations += pairs;
+    s.parallel_rejected += parallel;
+    s.false_positives += false_positives;
+    s.surface_queries += surface_queries;
+    s.surface_pairs += surface_pairs;
+  }
 };
 
 // Beam×beam estimate along the query segment [0, t_q] of one camera segment (§4, §5).
@@ -557,27 +565,10 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   auto last_report = Clock::now();
   auto last_checkpoint = Clock::now();
   int checkpointed_iterations = stats.iterations_done;
-  Counters counters;  // continue the resumed totals
-  counters.queries = stats.queries;
-  counters.candidates = stats.candidates;
-  counters.pairs = stats.pair_evaluations;
-  counters.parallel = stats.parallel_rejected;
-  counters.false_positives = stats.false_positives;
-  counters.surface_queries = stats.surface_queries;
-  counters.surface_pairs = stats.surface_pairs;
-  auto sync_counters = [&] {
-    stats.queries = counters.queries;
-    stats.candidates = counters.candidates;
-    stats.pair_evaluations = counters.pairs;
-    stats.parallel_rejected = counters.parallel;
-    stats.false_positives = counters.false_positives;
-    stats.surface_queries = counters.surface_queries;
-    stats.surface_pairs = counters.surface_pairs;
-  };
+  std::mutex stats_mutex;  // tiles add their counts to stats (the resumed totals continue)
   const bool checkpointing =
       checkpoint && (settings.checkpoint_every_iterations > 0 || settings.checkpoint_every_s > 0);
   auto save_checkpoint = [&] {
-    sync_counters();
     stats.time_total_s = elapsed();
     checkpointed_iterations = stats.iterations_done;
     last_checkpoint = Clock::now();
@@ -626,19 +617,6 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
             trace_light_path(cs, settings, it, j, chunk_records[c]);
         }
       });
-      if (g0 == 0 && beams.capacity() == 0) {
-        // Room for the whole iteration at the first group's rate, with a margin: capacity that is
-        // never written costs address space, not memory, and a vector that grows by doubling would
-        // hold its old and new buffers at once.
-        std::size_t first_beams = 0, first_photons = 0;
-        for (const auto& rec : chunk_records) {
-          first_beams += rec.beams.size();
-          first_photons += rec.photons.size();
-        }
-        const double scale = 1.25 * double(M) / double(std::min<std::uint64_t>(M, g1 * kPathChunk));
-        beams.reserve(std::size_t(scale * double(first_beams)) + 1024);
-        photons.reserve(std::size_t(scale * double(first_photons)) + 1024);
-      }
       for (auto& rec : chunk_records) {
         beams.insert(beams.end(), rec.beams.begin(), rec.beams.end());
         photons.insert(photons.end(), rec.photons.begin(), rec.photons.end());
@@ -677,18 +655,14 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
         TileStats ts;
         const int x0 = int(t % tiles_x) * settings.tile_size, y0 = int(t / tiles_x) * settings.tile_size;
         const int x1 = std::min(W, x0 + settings.tile_size), y1 = std::min(H, y0 + settings.tile_size);
-        tile->x0 = x0;
-        tile->y0 = y0;
+        tile->place(x0, y0, x1 - x0, y1 - y0);
         for (int y = y0; y < y1; ++y)
           for (int x = x0; x < x1; ++x) trace_camera_path(pass, *tile, x, y, cand, ts);
-        tile->flush(state, W, x1 - x0, y1 - y0);
-        counters.queries += ts.queries;
-        counters.candidates += ts.candidates;
-        counters.pairs += ts.pairs;
-        counters.parallel += ts.parallel;
-        counters.false_positives += ts.false_positives;
-        counters.surface_queries += ts.surface_queries;
-        counters.surface_pairs += ts.surface_pairs;
+        tile->flush(state);
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex);
+          ts.add_to(stats);
+        }
         // Only the calling thread may talk to Python (signals are delivered to the main thread).
         if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5)
           report(int(it), R, T, beams.size(), r_s, photons.size());
@@ -721,7 +695,6 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
 
   // A cancelled run keeps its completed iterations for a later resume.
   if (checkpointing && cancel.load() && stats.iterations_done > checkpointed_iterations) save_checkpoint();
-  sync_counters();
   stats.cancelled = cancel.load();
   RenderResult result;
   result.width = W;
