@@ -637,6 +637,9 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
         std::vector<SurfacePhoton>().swap(rec.photons);
       }
     }
+    // Beams in space order (a deterministic function of the path-ordered beams): the structure's
+    // leaves and the gather then read neighbouring records.
+    sort_beams_spatially(beams, settings.threads);
     stats.time_light_s += seconds_since(t0);
 
     // 2. The beam structure, with this iteration's radius.

@@ -37,6 +37,12 @@ struct LightRecords {
 void trace_light_path(const CompiledScene& scene, const RenderSettings& settings,
                       std::uint64_t iteration, std::uint64_t path_index, LightRecords& out);
 
+// Reorders beams along a Morton curve of their midpoints (ties by their previous index): a
+// deterministic function of the beams in light-path order, so results stay independent of the
+// thread count (ptpb.md §9), while beams near in space lie near in memory for the beam structure
+// and the gather. Moves the records in place (no second copy of the beams).
+void sort_beams_spatially(std::vector<Beam>& beams, int threads);
+
 // Russian roulette keeps a path with probability min(kMaxSurvival, throughput ratio) on both
 // sides, as Mitsuba's volpath does: a lossless medium (albedo 1) or total internal reflection
 // would otherwise keep q = 1 and a path alive without bound.
