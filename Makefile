@@ -16,10 +16,11 @@ CONFIG ?= configs/demo.yaml
 PYTEST_ARGS ?=
 export PATH := $(abspath $(VENV))/bin:$(PATH)
 
-# Debian packages: compiler and Python headers, Embree 3 for the ray engine, LLVM 19 for
-# Mitsuba's llvm_ad_rgb variant (older LLVMs crash it), OSMesa/EGL for pyvista's off-screen
-# rendering, Chromium to check the HTML report, and git for manifests' revisions.
-APT_PACKAGES := build-essential git python3 python3-venv python3-dev libembree-dev libllvm19 \
+# Debian packages: compiler and Python headers, Embree 3 for the ray engine and TBB (its scheduler,
+# which the beam BVH build limits to the render's threads), LLVM 19 for Mitsuba's llvm_ad_rgb
+# variant (older LLVMs crash it), OSMesa/EGL for pyvista's off-screen rendering, Chromium to check
+# the HTML report, and git for manifests' revisions.
+APT_PACKAGES := build-essential git python3 python3-venv python3-dev libembree-dev libtbb-dev libllvm19 \
 	libosmesa6 libegl1 libgl1 libglx-mesa0 libxrender1 chromium
 
 CORE_SOURCES := $(shell find render/core -name '*.cpp' -o -name '*.hpp' -o -name 'CMakeLists.txt') CMakeLists.txt

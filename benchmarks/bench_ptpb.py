@@ -479,9 +479,7 @@ def main() -> None:
     repeats = 1 if quick else 3
     best, cpu, hashes = scaling(core, cfg, 4 if quick else 6, repeats)
     speedup = best[1] / best[THREADS]
-    table.add("scaling", "1 thread", best[1], "s", note=f"best of {repeats}, bins mode; CPU time {cpu[1]:.2f} s; "
-              "Embree's BVH builder runs on the process's thread pool, which the first Embree device sizes to "
-              "every core, so this run's builds use both cores too (the build is under 10 % of a render)")
+    table.add("scaling", "1 thread", best[1], "s", note=f"best of {repeats}, bins mode; CPU time {cpu[1]:.2f} s")
     table.add("scaling", f"{THREADS} threads", best[THREADS], "s", note=f"CPU time {cpu[THREADS]:.2f} s; load average "
               f"before the runs {load}")
     table.add("scaling", "speed-up", speedup, "x", ">= 1.8x", speedup >= 1.8,

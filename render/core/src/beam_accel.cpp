@@ -25,6 +25,9 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#if defined(PTPB_HAVE_TBB)
+#include <tbb/task_arena.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -461,7 +464,14 @@ class BeamBvh final : public BeamAccel {
     args.setNodeBounds = set_node_bounds;
     args.createLeaf = create_leaf;
     args.userPtr = &source;
+#if defined(PTPB_HAVE_TBB)
+    // Embree's scheduler is shared by the process and sized by its first device (every core for
+    // the scene's); an arena of the render's thread count keeps the build to it.
+    tbb::task_arena arena(resolve_thread_count(threads));
+    arena.execute([&] { root_ = reinterpret_cast<std::uintptr_t>(rtcBuildBVH(&args)); });
+#else
     root_ = reinterpret_cast<std::uintptr_t>(rtcBuildBVH(&args));
+#endif
     if (!root_ || rtcGetDeviceError(device_) != RTC_ERROR_NONE)
       throw std::runtime_error("Embree failed to build the beam BVH");
     anchor_ = (bounds.lo + bounds.hi) * 0.5;
@@ -665,8 +675,8 @@ class BeamBvh final : public BeamAccel {
   static constexpr float kPieceTestCost = 0.25f;
   static constexpr int kStackSize = 256;           // > 3 * maximal depth + 1
 
-  // Embree builds with its own thread pool, sized here to the render's thread count. That is a
-  // request: Embree's task scheduler is shared by the process and sized by its first device.
+  // Embree builds with its own thread pool, sized here to the render's thread count; Embree's task
+  // scheduler is shared by the process, though, and sized by its first device (see the arena).
   void use_device(int threads) {
     if (device_ && threads == device_threads_) return;
     if (bvh_) { rtcReleaseBVH(bvh_); bvh_ = nullptr; }
