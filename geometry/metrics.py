@@ -46,14 +46,20 @@ def dominant_wavelength(h: np.ndarray, spacing: float) -> float:
     return _peak_wavelength(k, power, 1)
 
 
+def _transects(h: np.ndarray, axis: int) -> np.ndarray:
+    """The straight transects along ``axis`` (0: north-south columns, 1: east-west rows), one a row."""
+    profiles = np.moveaxis(np.asarray(h, float), axis, 0)
+    return profiles.reshape(profiles.shape[0], -1).T
+
+
 def transect_power_spectrum(h: np.ndarray, spacing: float, axis: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Mean power spectrum of the grid's straight transects along ``axis`` (0: north-south columns,
     1: east-west rows), each less its own mean: (k [rad m-1] at 0, k_1, ..., (n/2) k_1; power per
     bin [m2], one-sided, so that it sums to the mean transect variance)."""
-    profiles = np.moveaxis(np.asarray(h, float), axis, 0)
-    n = profiles.shape[0]
-    spectrum = np.abs(np.fft.rfft(profiles - profiles.mean(axis=0), axis=0)) ** 2 / n**2
-    power = spectrum.reshape(spectrum.shape[0], -1).mean(axis=1)
+    profiles = _transects(h, axis)
+    n = profiles.shape[1]
+    spectrum = np.abs(np.fft.rfft(profiles - profiles.mean(axis=1, keepdims=True), axis=1)) ** 2 / n**2
+    power = spectrum.mean(axis=0)
     power[1:(n + 1) // 2] *= 2.0  # fold in the negative wavenumbers
     return np.arange(power.size) * 2.0 * np.pi / (n * spacing), power
 
@@ -89,11 +95,6 @@ def _mean_crossing_stretches(profile: np.ndarray) -> tuple[np.ndarray, np.ndarra
     crest_stretch = above[starts]
     return (np.maximum.reduceat(deviation, starts)[crest_stretch],
             np.minimum.reduceat(deviation, starts)[~crest_stretch])
-
-
-def _transects(h: np.ndarray, axis: int) -> np.ndarray:
-    profiles = np.moveaxis(np.asarray(h, float), axis, 0)
-    return profiles.reshape(profiles.shape[0], -1).T
 
 
 def crest_to_trough(h: np.ndarray, axis: int = 0) -> float:

@@ -51,8 +51,9 @@ constexpr double kParallelKeepSin2 = 1e-4;
 // Boxes grow by this fraction of the scene scale beyond R: it covers the float rounding of the
 // boxes, of Embree's float ray and of the piece boundaries, so a pair within R is never missed.
 constexpr double kBoxMargin = 4e-6;
-// The exact test accepts t and s this fraction of the scene scale outside their ranges, and u up to
-// R (1 + 1e-9): far above rounding, so the gather never sees fewer pairs than its own test accepts.
+// The grid's exact test accepts t and s this fraction of the scene scale outside their ranges, and u
+// up to R (1 + 1e-9): far above rounding, so the gather never sees fewer pairs than its own test
+// accepts. (The BVH's float test has its own margin, kCandidateSlack.)
 constexpr double kRangeSlack = 1e-9;
 
 struct Box {
@@ -278,9 +279,8 @@ class BeamGrid final : public BeamAccel {
   std::vector<BeamLine> lines_;
 };
 
-// A diced piece is the builder's primitive itself: its inflated box, geomID = the beam and
-// primID = k | n << 16 (piece k of n). Its beam's line is read from the beam (no copy), and the
-// half-open share [s_begin, s_end) of the beam parameter it owns follows from k, n and the length.
+// A diced piece is first the builder's primitive itself: its inflated box, geomID = the beam and
+// primID = k | n << 16 (piece k of n). After the build its slot holds its PieceLine instead.
 
 // A 4-wide BVH node: child boxes in float, structure of arrays. A child pointer with bit 0 set is a
 // leaf (see kLeafTag); a null child has an empty box.
@@ -326,12 +326,9 @@ void set_node_bounds(void* node_ptr, const RTCBounds** bounds, unsigned int coun
 }
 
 // Boundary j of the n pieces of a beam of length L: the pieces split [0, L] at float-rounded
-// boundaries (computed the same way for both neighbours, so every s_b has exactly one owner), and
-// the first and last run past 0 and L by the slack.
-inline double piece_boundary(double length, int j, int n, double slack) {
-  if (j == 0) return -slack;
-  if (j == n) return length + slack;
-  return static_cast<float>(length * j / n);
+// boundaries, computed the same way for both neighbours.
+inline double piece_boundary(double length, int j, int n) {
+  return j == n ? length : static_cast<float>(length * j / n);
 }
 
 // The box of piece k of n, inflated by `inflate` and rounded outwards so that the float box still
@@ -405,7 +402,6 @@ class BeamBvh final : public BeamAccel {
     use_device(resolve_thread_count(threads));
     const Box bounds = beams_bounds(beams);
     const double scale = scene_scale(bounds);
-    slack_ = kRangeSlack * scale;
     const double inflate = radius + kBoxMargin * scale;
     // Automatic piece length: a few R (tight boxes), but never so short that a beam has more than
     // about two pieces on average. Long beams diced at 4R (the cube of ptpb.md §10 test 4: ~30
@@ -434,7 +430,8 @@ class BeamBvh final : public BeamAccel {
       std::vector<RTCBuildPrimitive>().swap(prims_);
       prims_.reserve((piece_count_ + kLeafPad) * 11 / 10);
     }
-    prims_.assign(piece_count_ + kLeafPad, RTCBuildPrimitive{});  // zeroed padding: see float_candidates4
+    prims_.resize(piece_count_ + kLeafPad);  // every piece's slot is written below
+    std::fill(prims_.end() - kLeafPad, prims_.end(), RTCBuildPrimitive{});  // zeroed padding: see float_candidates4
     parallel_for_chunks(chunks, 1, threads, [&](std::size_t c0, std::size_t c1) {
       for (std::size_t c = c0; c < c1; ++c) {
         std::size_t slot = chunk_start[c];
@@ -498,7 +495,7 @@ class BeamBvh final : public BeamAccel {
       near_row[a] = inv[a] < 0 ? 3 + a : a;
       far_row[a] = inv[a] < 0 ? a : 3 + a;
     }
-    const float t_far = std::nextafter(static_cast<float>(t_max + slack_), 1e30f);
+    const float t_far = std::nextafter(static_cast<float>(t_max), 1e30f);
 #if defined(__SSE2__)
     const __m128 org4[3] = {_mm_set1_ps(org[0]), _mm_set1_ps(org[1]), _mm_set1_ps(org[2])};
     const __m128 inv4[3] = {_mm_set1_ps(inv[0]), _mm_set1_ps(inv[1]), _mm_set1_ps(inv[2])};
@@ -580,7 +577,7 @@ class BeamBvh final : public BeamAccel {
     const double span = length(rel) + half_diagonal_ + t_max + 4.0 * radius_;
     f.t_max = static_cast<float>(t_max);
     f.radius = static_cast<float>(radius_);
-    f.margin = static_cast<float>(kCandidateSlack * span + slack_);
+    f.margin = static_cast<float>(kCandidateSlack * span);
     return f;
   }
 
@@ -658,7 +655,7 @@ class BeamBvh final : public BeamAccel {
       const std::uint32_t beam = prim[i].geomID;
       const int k = int(prim[i].primID & 0xFFFFu), pieces = int(prim[i].primID >> 16);
       const Beam& b = beams[beam];
-      const double s0 = piece_boundary(b.length, k, pieces, 0.0), s1 = piece_boundary(b.length, k + 1, pieces, 0.0);
+      const double s0 = piece_boundary(b.length, k, pieces), s1 = piece_boundary(b.length, k + 1, pieces);
       const Vec3d start = b.origin + b.direction * s0 - anchor_;
       PieceLine* line = new (&prim[i]) PieceLine;  // ends the primitive's lifetime in its slot
       for (int a = 0; a < 3; ++a) {
@@ -688,7 +685,7 @@ class BeamBvh final : public BeamAccel {
   }
 
   double dice_length_;
-  double radius_ = 0.0, slack_ = 0.0;
+  double radius_ = 0.0;
   Vec3d anchor_{};              // the beams' box centre: the origin of the piece lines
   double half_diagonal_ = 0.0;  // of the beams' box
   RTCDevice device_ = nullptr;
