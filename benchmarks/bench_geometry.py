@@ -6,9 +6,9 @@ Writes benchmarks/results/geometry.csv and geometry.md. The 128^2 row is the dem
 simulate fewer days to keep the run to a few minutes; per-day time is the comparable column.
 Pictures are excluded (their cost does not depend on the grid: ~4 s).
 """
+
 from __future__ import annotations
 
-import csv
 import os
 import sys
 import time
@@ -40,9 +40,17 @@ def bench(cells: int, days: int) -> dict:
     t2 = time.perf_counter()
     metrics.morphology(grown.height, cfg.spacing)
     t3 = time.perf_counter()
-    return {"grid": f"{cells}^2", "days": days, "growth_s": t1 - t0, "per_day_s": (t1 - t0) / days,
-            "horizons_s": grown.timings["horizons_s"], "mesh_s": t2 - t1, "metrics_s": t3 - t2,
-            "total_s": t3 - t0, "triangles": len(solid.faces)}
+    return {
+        "grid": f"{cells}^2",
+        "days": days,
+        "growth_s": t1 - t0,
+        "per_day_s": (t1 - t0) / days,
+        "horizons_s": grown.timings["horizons_s"],
+        "mesh_s": t2 - t1,
+        "metrics_s": t3 - t2,
+        "total_s": t3 - t0,
+        "triangles": len(solid.faces),
+    }
 
 
 def main() -> None:
@@ -50,20 +58,32 @@ def main() -> None:
     for cells, days in CASES:
         row = bench(cells, days)
         rows.append(row)
-        print(f"{row['grid']:>6}  {days:3d} days  growth {row['growth_s']:7.2f} s ({row['per_day_s']:.2f} s/day, "
-              f"horizons {row['horizons_s']:.2f} s)  mesh {row['mesh_s']:.2f} s  total {row['total_s']:.2f} s", flush=True)
+        print(
+            f"{row['grid']:>6}  {days:3d} days  growth {row['growth_s']:7.2f} s ({row['per_day_s']:.2f} s/day, "
+            f"horizons {row['horizons_s']:.2f} s)  mesh {row['mesh_s']:.2f} s  total {row['total_s']:.2f} s",
+            flush=True,
+        )
     out = Path(__file__).resolve().parent / "results"
     out.mkdir(exist_ok=True)
     keys = list(rows[0])
-    lines = [",".join(keys)] + [",".join(f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]) for k in keys) for r in rows]
+    lines = [",".join(keys)] + [
+        ",".join(f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]) for k in keys) for r in rows
+    ]
     write_text_atomic(out / "geometry.csv", "\n".join(lines) + "\n")
-    md = ["# Geometry stage: time against grid size", "",
-          f"Machine: {os.cpu_count()} cores (shared). Spacing 6.25 cm, Tapado defaults; 256^2 and 512^2 simulate "
-          "fewer days (compare s/day). Growth + mesh + metrics; pictures excluded (~4 s, grid-independent).", "",
-          "| grid | days | growth [s] | per day [s] | horizons [s] | mesh [s] | metrics [s] | total [s] | triangles |",
-          "|---|---|---|---|---|---|---|---|---|"]
-    md += [f"| {r['grid']} | {r['days']} | {r['growth_s']:.2f} | {r['per_day_s']:.2f} | {r['horizons_s']:.2f} | "
-           f"{r['mesh_s']:.2f} | {r['metrics_s']:.2f} | {r['total_s']:.2f} | {r['triangles']} |" for r in rows]
+    md = [
+        "# Geometry stage: time against grid size",
+        "",
+        f"Machine: {os.cpu_count()} cores (shared). Spacing 6.25 cm, Tapado defaults; 256^2 and 512^2 simulate "
+        "fewer days (compare s/day). Growth + mesh + metrics; pictures excluded (~4 s, grid-independent).",
+        "",
+        "| grid | days | growth [s] | per day [s] | horizons [s] | mesh [s] | metrics [s] | total [s] | triangles |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    md += [
+        f"| {r['grid']} | {r['days']} | {r['growth_s']:.2f} | {r['per_day_s']:.2f} | {r['horizons_s']:.2f} | "
+        f"{r['mesh_s']:.2f} | {r['metrics_s']:.2f} | {r['total_s']:.2f} | {r['triangles']} |"
+        for r in rows
+    ]
     write_text_atomic(out / "geometry.md", "\n".join(md) + "\n")
     print("\n".join(md[4:]))
 

@@ -3,6 +3,7 @@
 Run with `make bench` (or `.venv/bin/python benchmarks/bench_rays.py`). Prints a table and writes
 benchmarks/results/rays.csv and rays.md.
 """
+
 from __future__ import annotations
 
 import time
@@ -58,15 +59,27 @@ def main() -> None:
                     reference = result.t
                 elif not np.array_equal(reference, result.t):
                     raise SystemExit("thread count changed the intersection results")
-            rows.append({"query": query, "threads": threads, "rays": ray_count, "triangles": engine.triangle_count,
-                         "seconds": round(seconds, 3), "mrays_per_s": round(ray_count / seconds / 1e6, 2)})
+            rows.append(
+                {
+                    "query": query,
+                    "threads": threads,
+                    "rays": ray_count,
+                    "triangles": engine.triangle_count,
+                    "seconds": round(seconds, 3),
+                    "mrays_per_s": round(ray_count / seconds / 1e6, 2),
+                }
+            )
     for query in ("intersect", "occluded"):
         one, two = (r for r in rows if r["query"] == query)
         two["speedup"] = round(one["seconds"] / two["seconds"], 2)
         one["speedup"] = 1.0
     header = ["query", "threads", "rays", "triangles", "seconds", "mrays_per_s", "speedup"]
-    lines = [f"Embree BVH build for {engine.triangle_count:,} triangles: {build_s:.2f} s", "",
-             "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines = [
+        f"Embree BVH build for {engine.triangle_count:,} triangles: {build_s:.2f} s",
+        "",
+        "| " + " | ".join(header) + " |",
+        "|" + "---|" * len(header),
+    ]
     lines += ["| " + " | ".join(str(r[h]) for h in header) + " |" for r in rows]
     table = "\n".join(lines) + "\n"
     print(table)

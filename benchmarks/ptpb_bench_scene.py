@@ -8,6 +8,7 @@
   ``cache/reference-<hash>.npz``, keyed by the scene files, the spp and the Mitsuba versions. Two halves
   let the error of a render be corrected for the reference's own noise (``FrameError``).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -69,10 +70,10 @@ class Reference:
     spp: int
     seconds: float
 
-    def frame_error(self) -> "FrameError":
+    def frame_error(self) -> FrameError:
         return FrameError(*self.frames)
 
-    def steady_error(self) -> "FrameError":
+    def steady_error(self) -> FrameError:
         return FrameError(self.steady[0][None], self.steady[1][None])
 
 
@@ -87,27 +88,44 @@ def reference(scene_dir: Path, cfg) -> Reference:
     import mitransient
 
     spp = cfg.transient_spp or cfg.spp
-    key_text = json.dumps({"scene": _scene_digest(scene_dir), "spp": spp, "seeds": REFERENCE_SEEDS,
-                           "mitsuba": mitsuba.__version__, "mitransient": mitransient.__version__})
+    key_text = json.dumps(
+        {
+            "scene": _scene_digest(scene_dir),
+            "spp": spp,
+            "seeds": REFERENCE_SEEDS,
+            "mitsuba": mitsuba.__version__,
+            "mitransient": mitransient.__version__,
+        }
+    )
     path = CACHE / f"reference-{hashlib.sha256(key_text.encode()).hexdigest()[:16]}.npz"
     if path.is_file():
         with np.load(path) as z:
-            return Reference((z["frames_a"], z["frames_b"]), (z["steady_a"], z["steady_b"]), int(z["spp"]),
-                             float(z["seconds"]))
+            return Reference(
+                (z["frames_a"], z["frames_b"]), (z["steady_a"], z["steady_b"]), int(z["spp"]), float(z["seconds"])
+            )
     print(f"rendering the reference: mitransient at {spp} spp, cached in {path} (once; minutes) ...", flush=True)
     scene = Scene.load(scene_dir / "scene.json")
     halves = []
     t0 = time.perf_counter()
     for seed in REFERENCE_SEEDS:
-        frames, steady, _ = render_transient(scene, scene_dir, spp=spp // 2, spp_per_pass=cfg.spp_per_pass,
-                                             seed=seed, quiet=False)
+        frames, steady, _ = render_transient(
+            scene, scene_dir, spp=spp // 2, spp_per_pass=cfg.spp_per_pass, seed=seed, quiet=False
+        )
         halves.append((frames, steady))
     seconds = time.perf_counter() - t0
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
-            np.savez(f, frames_a=halves[0][0], frames_b=halves[1][0], steady_a=halves[0][1],
-                     steady_b=halves[1][1], spp=spp, seconds=seconds, key=key_text)
+            np.savez(
+                f,
+                frames_a=halves[0][0],
+                frames_b=halves[1][0],
+                steady_a=halves[0][1],
+                steady_b=halves[1][1],
+                spp=spp,
+                seconds=seconds,
+                key=key_text,
+            )
     return Reference((halves[0][0], halves[1][0]), (halves[0][1], halves[1][1]), spp, seconds)
 
 
@@ -127,8 +145,9 @@ class FrameError:
         self.reference_noise = float(np.mean((a - b) ** 2 * self.weight) / 4.0)
 
     def raw(self, x: np.ndarray) -> float:
-        return float(np.mean((np.asarray(x, np.float64).reshape(self.reference.shape) - self.reference) ** 2
-                             * self.weight))
+        return float(
+            np.mean((np.asarray(x, np.float64).reshape(self.reference.shape) - self.reference) ** 2 * self.weight)
+        )
 
     def __call__(self, x: np.ndarray) -> float:
         return self.raw(x) - self.reference_noise

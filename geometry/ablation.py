@@ -18,11 +18,12 @@ simulated day by default), integrates the absorbed energy over that period's sun
 applies it in sub-steps that each respect the Hamilton-Jacobi CFL limit (6.2). Heights are [m],
 times [s].
 """
+
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -41,15 +42,22 @@ def wavenumbers(n: int, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     return kx, ky
 
 
-def linear_growth_rate(k: np.ndarray, scattered_coefficient: float, diffusivity: float,
-                       hyperdiffusivity: float = 0.0) -> np.ndarray:
+def linear_growth_rate(
+    k: np.ndarray, scattered_coefficient: float, diffusivity: float, hyperdiffusivity: float = 0.0
+) -> np.ndarray:
     """sigma(k) = A_B |k| - D k^2 - K k^4 [s-1] for |k| [rad m-1], A_B [m s-1], D [m2 s-1], K [m4 s-1]."""
     k = np.abs(k)
     return scattered_coefficient * k - diffusivity * k**2 - hyperdiffusivity * k**4
 
 
-def spectral_linear_step(h: np.ndarray, spacing: float, duration: float, scattered_coefficient: float,
-                         diffusivity: float, hyperdiffusivity: float) -> np.ndarray:
+def spectral_linear_step(
+    h: np.ndarray,
+    spacing: float,
+    duration: float,
+    scattered_coefficient: float,
+    diffusivity: float,
+    hyperdiffusivity: float,
+) -> np.ndarray:
     """Exact (exponential-integrator) step of the linear terms over ``duration`` [s] (6.2).
 
     grow_field passes the flux time (time integral of the horizontal flux over the reference flux),
@@ -121,12 +129,17 @@ def _godunov_slopes(h: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarr
     fwd_x = np.minimum((np.roll(h, -1, axis=1) - h) / spacing, 0.0) ** 2
     back_y = np.maximum((h - np.roll(h, 1, axis=0)) / spacing, 0.0) ** 2
     fwd_y = np.minimum((np.roll(h, -1, axis=0) - h) / spacing, 0.0) ** 2
-    return (np.maximum(back_x, fwd_x), np.maximum(back_y, fwd_y),
-            np.where(back_x >= fwd_x, -1, 1), np.where(back_y >= fwd_y, -1, 1))
+    return (
+        np.maximum(back_x, fwd_x),
+        np.maximum(back_y, fwd_y),
+        np.where(back_x >= fwd_x, -1, 1),
+        np.where(back_y >= fwd_y, -1, 1),
+    )
 
 
-def surface_inverse_latent_heat(h: np.ndarray, spacing: float, inverse_heat: np.ndarray,
-                                max_slope_deg: float) -> tuple[np.ndarray, float]:
+def surface_inverse_latent_heat(
+    h: np.ndarray, spacing: float, inverse_heat: np.ndarray, max_slope_deg: float
+) -> tuple[np.ndarray, float]:
     """1/L_eff integrated over the surface a column exposes to sky and terrain light, per unit
     horizontal area [kg J-1]. The surface is the upwind true area sqrt(1 + |grad h|^2) of a normal
     recession (6.1), slope clamped at ``max_slope_deg``: its top (area 1) at the cell's own value,
@@ -142,7 +155,9 @@ def surface_inverse_latent_heat(h: np.ndarray, spacing: float, inverse_heat: np.
     return inverse_heat + (factor - 1.0) * faces, float(np.mean(grad2 > limit2))
 
 
-def sunward_slopes(h: np.ndarray, spacing: float, sun: np.ndarray, max_slope_deg: float) -> tuple[np.ndarray, np.ndarray]:
+def sunward_slopes(
+    h: np.ndarray, spacing: float, sun: np.ndarray, max_slope_deg: float
+) -> tuple[np.ndarray, np.ndarray]:
     """One-sided slopes (dh/dx, dh/dy) taken on the sun's side of each cell, the upwind differences of
     the direct-beam lowering (see direct_beam_lowering), clamped in magnitude at ``max_slope_deg``."""
     p = (np.roll(h, -1, axis=1) - h) / spacing if sun[0] >= 0 else (h - np.roll(h, 1, axis=1)) / spacing
@@ -175,8 +190,7 @@ def direct_beam_mass(p: np.ndarray, q: np.ndarray, sun: np.ndarray, inverse_heat
     return np.where(direct_beam_lowering(p, q, sun) > 0.0, weighted, 0.0)
 
 
-def initial_height_field(n: int, spacing: float, rms: float, wavelength: float,
-                         rng: np.random.Generator) -> np.ndarray:
+def initial_height_field(n: int, spacing: float, rms: float, wavelength: float, rng: np.random.Generator) -> np.ndarray:
     """Flat snow plus isotropic band-limited Gaussian noise [m] with RMS ``rms`` [m], its power
     centred on ``wavelength`` [m] (a Gaussian band of relative width 0.5 in |k|)."""
     kx, ky = wavenumbers(n, spacing)
@@ -187,8 +201,9 @@ def initial_height_field(n: int, spacing: float, rms: float, wavelength: float,
     noise = np.real(np.fft.ifft2(np.fft.fft2(rng.standard_normal((n, n))) * band))
     std = noise.std()
     if std == 0.0:
-        raise ValueError("the seeded noise band is empty: geometry.initial_wavelength must be between "
-                         "2 cells and the domain size")
+        raise ValueError(
+            "the seeded noise band is empty: geometry.initial_wavelength must be between 2 cells and the domain size"
+        )
     return noise * (rms / std)
 
 
@@ -256,8 +271,15 @@ class GrowthResult:
     timings: dict = field(default_factory=dict)
 
 
-def _period_energy(h: np.ndarray, spacing: float, s: GrowthSettings, sun: sunpath.DailySun, chunk: np.ndarray,
-                   horizons: irradiance.Horizons, inverse_heat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def _period_energy(
+    h: np.ndarray,
+    spacing: float,
+    s: GrowthSettings,
+    sun: sunpath.DailySun,
+    chunk: np.ndarray,
+    horizons: irradiance.Horizons,
+    inverse_heat: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Absorbed shortwave of one frozen-geometry period, split for the recession step.
 
     Returns the direct beam per unit horizontal area, already weighted by 1/L_eff over the surface
@@ -289,8 +311,13 @@ def _period_energy(h: np.ndarray, spacing: float, s: GrowthSettings, sun: sunpat
     return absorptance * direct_mass * kept, absorptance * (sky + terrain) * kept, absorbed, flux_seconds
 
 
-def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np.random.Generator,
-               progress: Callable[[int], None] | None = None) -> GrowthResult:
+def grow_field(
+    h0: np.ndarray,
+    spacing: float,
+    settings: GrowthSettings,
+    rng: np.random.Generator,
+    progress: Callable[[int], None] | None = None,
+) -> GrowthResult:
     """Grow a field from ``h0`` over ``settings.days`` days of sun (penitentes.md section 5)."""
     import time
 
@@ -313,7 +340,9 @@ def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np
             exposure = horizons.sky_view if s.switch_proxy == "sky_view" else horizons.openness
             melt = melt_fraction(exposure, s.switch_centre, s.switch_width) if s.melt_enabled else np.zeros_like(h)
             inverse_heat = inverse_latent_heat(melt)
-            direct_mass, diffuse, absorbed, flux_seconds = _period_energy(h, spacing, s, sun, chunk, horizons, inverse_heat)
+            direct_mass, diffuse, absorbed, flux_seconds = _period_energy(
+                h, spacing, s, sun, chunk, horizons, inverse_heat
+            )
             t2 = time.perf_counter()
             volume_per_mass = s.ablation_efficiency / s.density  # [m3 kg-1]
             h_before = h.copy()
@@ -327,7 +356,9 @@ def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np
                 h -= lowering / substeps
                 clamp_sum, clamp_count = clamp_sum + clamped, clamp_count + 1
             # Linear terms run on flux time, like A_B, so the selected band stays lambda* = 4 pi D / A_B.
-            h = spectral_linear_step(h, spacing, flux_seconds, s.scattered_coefficient, s.diffusivity, s.hyperdiffusivity)
+            h = spectral_linear_step(
+                h, spacing, flux_seconds, s.scattered_coefficient, s.diffusivity, s.hyperdiffusivity
+            )
             irradiance.check_height_field(h, f"height field after day {day + 1}")
             change = h - h_before
             max_change = max(max_change, float(change.max() - change.min()))
@@ -343,23 +374,44 @@ def grow_field(h0: np.ndarray, spacing: float, settings: GrowthSettings, rng: np
     if horizons is None:
         horizons = irradiance.compute_horizons(h, spacing, s.azimuths)
     return GrowthResult(
-        height=h, spacing=spacing, snapshots=np.array(snapshots), snapshot_days=np.array(snapshot_days),
-        relief_history=np.array(relief), sky_view=horizons.sky_view, melt=melt, daily_absorbed=absorbed,
-        clamp_fraction=clamp_sum / max(clamp_count, 1), max_daily_change=max_change, timings=timings,
+        height=h,
+        spacing=spacing,
+        snapshots=np.array(snapshots),
+        snapshot_days=np.array(snapshot_days),
+        relief_history=np.array(relief),
+        sky_view=horizons.sky_view,
+        melt=melt,
+        daily_absorbed=absorbed,
+        clamp_fraction=clamp_sum / max(clamp_count, 1),
+        max_daily_change=max_change,
+        timings=timings,
     )
 
 
 def settings_from_config(cfg) -> GrowthSettings:
     """GrowthSettings from a GeometryConfig (pipeline.schema.geometry)."""
     return GrowthSettings(
-        latitude=cfg.latitude, start_day_of_year=cfg.start_day_of_year, days=cfg.days,
-        sun_positions_per_day=cfg.sun_positions_per_day, refreshes_per_day=cfg.horizon_refreshes_per_day,
+        latitude=cfg.latitude,
+        start_day_of_year=cfg.start_day_of_year,
+        days=cfg.days,
+        sun_positions_per_day=cfg.sun_positions_per_day,
+        refreshes_per_day=cfg.horizon_refreshes_per_day,
         sky=Sky(cfg.direct_normal_irradiance, cfg.optical_depth, cfg.diffuse_fraction),
-        albedo=cfg.albedo, density=cfg.density, ablation_efficiency=cfg.ablation_efficiency,
-        melt_enabled=cfg.melt_enabled, switch_centre=cfg.switch_centre, switch_width=cfg.switch_width,
-        switch_proxy=cfg.switch_proxy, diffusivity=cfg.diffusivity, hyperdiffusivity=cfg.hyperdiffusivity,
+        albedo=cfg.albedo,
+        density=cfg.density,
+        ablation_efficiency=cfg.ablation_efficiency,
+        melt_enabled=cfg.melt_enabled,
+        switch_centre=cfg.switch_centre,
+        switch_width=cfg.switch_width,
+        switch_proxy=cfg.switch_proxy,
+        diffusivity=cfg.diffusivity,
+        hyperdiffusivity=cfg.hyperdiffusivity,
         scattered_coefficient=cfg.scattered_light_coefficient,
-        scattered_reference_flux=cfg.scattered_light_reference_flux, azimuths=cfg.azimuths,
-        bounces=cfg.bounces, max_slope_deg=cfg.max_slope_deg, sky_loss=cfg.sky_loss, cfl=cfg.cfl,
+        scattered_reference_flux=cfg.scattered_light_reference_flux,
+        azimuths=cfg.azimuths,
+        bounces=cfg.bounces,
+        max_slope_deg=cfg.max_slope_deg,
+        sky_loss=cfg.sky_loss,
+        cfl=cfg.cfl,
         snapshots=cfg.snapshots,
     )

@@ -7,6 +7,7 @@ rows run north (y), columns east (x). Visibility uses sweeps along sheared grid 
 of a step shares one fractional offset, so each step is two array slices and a blend. Cost is
 O(N^2) per step and at most one domain period of steps per direction.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -22,7 +23,9 @@ def check_height_field(h: np.ndarray, name: str = "height field") -> np.ndarray:
         raise ValueError(f"{name} must be a square 2-D grid of at least 4x4 cells, got shape {h.shape}")
     if not np.all(np.isfinite(h)):
         bad = int(np.size(h) - np.count_nonzero(np.isfinite(h)))
-        raise ValueError(f"{name} contains {bad} NaN/inf values; check the growth parameters (time step, geometry.diffusivity)")
+        raise ValueError(
+            f"{name} contains {bad} NaN/inf values; check the growth parameters (time step, geometry.diffusivity)"
+        )
     return h
 
 
@@ -56,11 +59,11 @@ class _ShearedMarch:
         wx, wy = ox - fx, oy - fy  # one of them is zero
         n, p = self.n, self.padded
         x0, y0 = int(fx) % n, int(fy) % n
-        base = p[y0:y0 + n, x0:x0 + n]
+        base = p[y0 : y0 + n, x0 : x0 + n]
         if wx > 1e-12:
-            return (1.0 - wx) * base + wx * p[y0:y0 + n, x0 + 1:x0 + 1 + n]
+            return (1.0 - wx) * base + wx * p[y0 : y0 + n, x0 + 1 : x0 + 1 + n]
         if wy > 1e-12:
-            return (1.0 - wy) * base + wy * p[y0 + 1:y0 + 1 + n, x0:x0 + n]
+            return (1.0 - wy) * base + wy * p[y0 + 1 : y0 + 1 + n, x0 : x0 + n]
         return base
 
 
@@ -119,8 +122,9 @@ def _sector_sky(tan_horizon: np.ndarray, slope_along: np.ndarray, cos_slope: np.
     return cos_slope * (inv - slope_along * (zenith - t * inv))
 
 
-def compute_horizons(h: np.ndarray, spacing: float, n_azimuths: int, rotation: float = 0.0,
-                     tolerance_deg: float = 0.25) -> Horizons:
+def compute_horizons(
+    h: np.ndarray, spacing: float, n_azimuths: int, rotation: float = 0.0, tolerance_deg: float = 0.25
+) -> Horizons:
     """Horizon angles, sky view factor and terrain view weights by sheared sweeps in M azimuths.
 
     While sweeping, each rise of the running horizon exposes a band of sky-integrand weight that is
@@ -200,8 +204,9 @@ def terrain_irradiance(radiosity: np.ndarray, spacing: float, horizons: Horizons
     return total
 
 
-def bounce_terrain_light(primary: np.ndarray, albedo: float, spacing: float, horizons: Horizons,
-                         bounces: int) -> np.ndarray:
+def bounce_terrain_light(
+    primary: np.ndarray, albedo: float, spacing: float, horizons: Horizons, bounces: int
+) -> np.ndarray:
     """Terrain-reflected irradiance after ``bounces`` Jacobi gathers, given the primary (direct +
     sky) irradiance per unit true area. Lambertian snow: radiosity = albedo * total irradiance."""
     terrain = np.zeros_like(primary)
@@ -222,9 +227,16 @@ class RadiationBudget:
     sun_visible: np.ndarray
 
 
-def radiation_budget(h: np.ndarray, spacing: float, sun: np.ndarray, direct_normal: float,
-                     diffuse_horizontal: float, albedo: float, horizons: Horizons,
-                     bounces: int) -> RadiationBudget:
+def radiation_budget(
+    h: np.ndarray,
+    spacing: float,
+    sun: np.ndarray,
+    direct_normal: float,
+    diffuse_horizontal: float,
+    albedo: float,
+    horizons: Horizons,
+    bounces: int,
+) -> RadiationBudget:
     """Irradiance and absorbed flux for one sun position (penitentes.md 3.4-3.7).
 
     direct_normal: S_b [W m-2]; diffuse_horizontal: S_d [W m-2]; albedo: local broadband albedo a [-].
@@ -241,8 +253,9 @@ def radiation_budget(h: np.ndarray, spacing: float, sun: np.ndarray, direct_norm
     return RadiationBudget(direct, sky, terrain, (1.0 - albedo) * total, albedo * total, visible)
 
 
-def field_albedo(h: np.ndarray, spacing: float, budget: RadiationBudget, horizons: Horizons,
-                 incident_horizontal: float) -> tuple[float, float]:
+def field_albedo(
+    h: np.ndarray, spacing: float, budget: RadiationBudget, horizons: Horizons, incident_horizontal: float
+) -> tuple[float, float]:
     """Broadband albedo of the field [-]: radiosity escaping to the sky through the top plane over
     the incident flux. Also returns the energy-closure error (absorbed + escaped - incident)/incident."""
     p, q = gradient(h, spacing)

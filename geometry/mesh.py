@@ -4,13 +4,13 @@ Frame and units of every mesh here (the project's convention): metres, x = east,
 z = up. The tile spans [0, L] x [0, L]; the surface's mean height sits at z = 0 and the flat base
 lies ``base_thickness`` below the deepest trough. Normals point out of the solid.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
 
 
 @dataclass(frozen=True)
@@ -60,10 +60,12 @@ def heightfield_solid(h: np.ndarray, spacing: float, base_thickness: float, tile
     bottom_ids = m * m + np.arange(nb)
     nxt = np.roll(np.arange(nb), -1)
     # Skirt quads (top i, top i+1, bottom i+1, bottom i), outward for a counter-clockwise loop.
-    skirt = np.concatenate((
-        np.column_stack((loop, bottom_ids, bottom_ids[nxt])),
-        np.column_stack((loop, bottom_ids[nxt], loop[nxt])),
-    ))
+    skirt = np.concatenate(
+        (
+            np.column_stack((loop, bottom_ids, bottom_ids[nxt])),
+            np.column_stack((loop, bottom_ids[nxt], loop[nxt])),
+        )
+    )
     centre_id = m * m + nb
     centre = np.array([[n * spacing / 2, n * spacing / 2, z_base]])
     base = np.column_stack((np.full(nb, centre_id), bottom_ids[nxt], bottom_ids))  # faces down
@@ -76,12 +78,17 @@ def manifold_volume(mesh: TriangleMesh) -> float:
     """Volume [m3] of a mesh checked by manifold3d; ValueError if it is not a closed 2-manifold."""
     import manifold3d
 
-    solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(mesh.vertices, np.float32),
-                                                tri_verts=np.asarray(mesh.faces, np.uint32)))
+    solid = manifold3d.Manifold(
+        manifold3d.Mesh(
+            vert_properties=np.asarray(mesh.vertices, np.float32), tri_verts=np.asarray(mesh.faces, np.uint32)
+        )
+    )
     status = solid.status()
     if status != manifold3d.Error.NoError:
-        raise ValueError(f"the penitente mesh is not watertight/manifold (manifold3d: {status.name}); "
-                         "lower geometry.max_triangles decimation or check the height field")
+        raise ValueError(
+            f"the penitente mesh is not watertight/manifold (manifold3d: {status.name}); "
+            "lower geometry.max_triangles decimation or check the height field"
+        )
     return float(solid.volume())
 
 
@@ -100,10 +107,17 @@ def decimate(mesh: TriangleMesh, max_triangles: int) -> TriangleMesh:
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(mesh.vertices, float), face_matrix=np.asarray(mesh.faces, np.int32)))
+    ms.add_mesh(
+        pymeshlab.Mesh(vertex_matrix=np.asarray(mesh.vertices, float), face_matrix=np.asarray(mesh.faces, np.int32))
+    )
     ms.meshing_decimation_quadric_edge_collapse(
-        targetfacenum=int(max_triangles), qualitythr=0.3, preservetopology=True, preservenormal=True,
-        optimalplacement=True, planarquadric=True, autoclean=True,
+        targetfacenum=int(max_triangles),
+        qualitythr=0.3,
+        preservetopology=True,
+        preservenormal=True,
+        optimalplacement=True,
+        planarquadric=True,
+        autoclean=True,
     )
     out = ms.current_mesh()
     return TriangleMesh(out.vertex_matrix().astype(float), out.face_matrix().astype(np.int64))

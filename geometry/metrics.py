@@ -2,6 +2,7 @@
 
 Angles are reported in degrees; azimuths clockwise from north. Heights [m], wavelengths [m].
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,8 +32,8 @@ def _peak_wavelength(k: np.ndarray, power: np.ndarray, first: int) -> float:
     """Wavelength [m] at the largest of power[first:], refined by a parabola in log power."""
     i = int(np.argmax(power[first:]) + first)
     peak = float(i)
-    if first <= i - 1 and i + 1 < len(power) and np.all(power[i - 1:i + 2] > 0):
-        a, b, c = np.log(power[i - 1:i + 2])
+    if first <= i - 1 and i + 1 < len(power) and np.all(power[i - 1 : i + 2] > 0):
+        a, b, c = np.log(power[i - 1 : i + 2])
         denom = a - 2.0 * b + c
         if denom < 0:
             peak = i + 0.5 * (a - c) / denom
@@ -60,7 +61,7 @@ def transect_power_spectrum(h: np.ndarray, spacing: float, axis: int = 0) -> tup
     n = profiles.shape[1]
     spectrum = np.abs(np.fft.rfft(profiles - profiles.mean(axis=1, keepdims=True), axis=1)) ** 2 / n**2
     power = spectrum.mean(axis=0)
-    power[1:(n + 1) // 2] *= 2.0  # fold in the negative wavenumbers
+    power[1 : (n + 1) // 2] *= 2.0  # fold in the negative wavenumbers
     return np.arange(power.size) * 2.0 * np.pi / (n * spacing), power
 
 
@@ -93,8 +94,10 @@ def _mean_crossing_stretches(profile: np.ndarray) -> tuple[np.ndarray, np.ndarra
         return np.zeros(0), np.zeros(0)
     deviation, above, starts = np.roll(deviation, -starts[0]), np.roll(above, -starts[0]), starts - starts[0]
     crest_stretch = above[starts]
-    return (np.maximum.reduceat(deviation, starts)[crest_stretch],
-            np.minimum.reduceat(deviation, starts)[~crest_stretch])
+    return (
+        np.maximum.reduceat(deviation, starts)[crest_stretch],
+        np.minimum.reduceat(deviation, starts)[~crest_stretch],
+    )
 
 
 def crest_to_trough(h: np.ndarray, axis: int = 0) -> float:
@@ -106,8 +109,11 @@ def crest_to_trough(h: np.ndarray, axis: int = 0) -> float:
     (relief); for thin blades between wide flat troughs it stays the blade height, where
     2 sqrt 2 RMS falls short, and for flat-topped walls it does not overshoot as RMS does.
     """
-    heights = [crests.mean() - troughs.mean() for crests, troughs in map(_mean_crossing_stretches, _transects(h, axis))
-               if crests.size]
+    heights = [
+        crests.mean() - troughs.mean()
+        for crests, troughs in map(_mean_crossing_stretches, _transects(h, axis))
+        if crests.size
+    ]
     return float(np.mean(heights)) if heights else 0.0
 
 
@@ -135,8 +141,7 @@ def ridge_orientation(h: np.ndarray, spacing: float) -> dict:
     gradient_azimuth = np.degrees(0.5 * np.pi - gradient_angle)
     ridge_azimuth = float(np.mod(gradient_azimuth + 90.0, 180.0))
     deviation = float(min(abs(ridge_azimuth - 90.0), 180.0 - abs(ridge_azimuth - 90.0)))
-    return {"ridge_azimuth_deg": ridge_azimuth, "ridge_deviation_from_east_west_deg": deviation,
-            "coherence": coherence}
+    return {"ridge_azimuth_deg": ridge_azimuth, "ridge_deviation_from_east_west_deg": deviation, "coherence": coherence}
 
 
 def lean(h: np.ndarray, spacing: float, steep_deg: float = 30.0, sector_deg: float = 45.0) -> dict:
@@ -149,11 +154,19 @@ def lean(h: np.ndarray, spacing: float, steep_deg: float = 30.0, sector_deg: flo
     north = steep & ((aspect < sector_deg) | (aspect > 360.0 - sector_deg))
     south = steep & (np.abs(aspect - 180.0) < sector_deg)
     if north.sum() < 10 or south.sum() < 10:
-        return {"lean_north_deg": float("nan"), "north_wall_slope_deg": float("nan"),
-                "south_wall_slope_deg": float("nan"), "steep_fraction": float(steep.mean())}
+        return {
+            "lean_north_deg": float("nan"),
+            "north_wall_slope_deg": float("nan"),
+            "south_wall_slope_deg": float("nan"),
+            "steep_fraction": float(steep.mean()),
+        }
     beta_n, beta_s = float(np.median(slope[north])), float(np.median(slope[south]))
-    return {"lean_north_deg": 0.5 * (beta_n - beta_s), "north_wall_slope_deg": beta_n,
-            "south_wall_slope_deg": beta_s, "steep_fraction": float(steep.mean())}
+    return {
+        "lean_north_deg": 0.5 * (beta_n - beta_s),
+        "north_wall_slope_deg": beta_n,
+        "south_wall_slope_deg": beta_s,
+        "steep_fraction": float(steep.mean()),
+    }
 
 
 def relief(h: np.ndarray) -> dict:
@@ -164,7 +177,9 @@ def relief(h: np.ndarray) -> dict:
     return {"rms_height_m": rms, "relief_m": 2.0 * np.sqrt(2.0) * rms, "range_1_99_m": float(hi - lo)}
 
 
-def aspect_histogram(h: np.ndarray, spacing: float, bins: int = 36, steep_deg: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
+def aspect_histogram(
+    h: np.ndarray, spacing: float, bins: int = 36, steep_deg: float = 30.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Histogram of downslope azimuth [deg] over steep facets: (bin edges, fraction per bin)."""
     p, q = irradiance.gradient(h, spacing)
     slope = np.degrees(np.arctan(np.hypot(p, q)))

@@ -1,5 +1,6 @@
 """Pictures of a grown field: hillshade map, metrics plot, pyvista render with the sun drawn in,
 and a time-lapse MP4 of the growth. All files are written atomically."""
+
 from __future__ import annotations
 
 import os
@@ -12,7 +13,9 @@ from geometry.mesh import TriangleMesh
 from pipeline.atomic import atomic_path
 
 
-def hillshade(h: np.ndarray, spacing: float, sun_azimuth_deg: float = 315.0, sun_elevation_deg: float = 35.0) -> np.ndarray:
+def hillshade(
+    h: np.ndarray, spacing: float, sun_azimuth_deg: float = 315.0, sun_elevation_deg: float = 35.0
+) -> np.ndarray:
     """Shaded relief in [0, 1]: cosine of the angle between the normal and a light direction (no shadows)."""
     az, el = np.radians(sun_azimuth_deg), np.radians(sun_elevation_deg)
     light = np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
@@ -68,7 +71,9 @@ def save_metrics_plot(path: Path, h: np.ndarray, spacing: float, relief_history:
     ax.set_xlabel("wavelength [m]")
     ax.set_ylabel("power per bin [m²]")
     ax.legend()
-    ax.set_title(f"power spectrum: λ_dom / H = {summary['spacing_to_height']:.2f} (H {summary['crest_to_trough_m']:.2f} m)")
+    ax.set_title(
+        f"power spectrum: λ_dom / H = {summary['spacing_to_height']:.2f} (H {summary['crest_to_trough_m']:.2f} m)"
+    )
     ax = fig.add_subplot(2, 2, 3, projection="polar")
     edges, frac = metrics.aspect_histogram(h, spacing)
     ax.set_theta_zero_location("N")
@@ -80,8 +85,9 @@ def save_metrics_plot(path: Path, h: np.ndarray, spacing: float, relief_history:
     ax.hist(np.degrees(np.arctan(np.hypot(p, q))).ravel(), bins=45, range=(0, 90))
     ax.set_xlabel("slope [deg]")
     ax.set_ylabel("cells")
-    ax.set_title(f"ridges {summary['ridge_deviation_from_east_west_deg']:.0f}° from E-W, "
-                 f"lean {summary['lean_north_deg']:.1f}° N")
+    ax.set_title(
+        f"ridges {summary['ridge_deviation_from_east_west_deg']:.0f}° from E-W, lean {summary['lean_north_deg']:.1f}° N"
+    )
     fig.tight_layout()
     _figure_to_file(fig, path, dpi=90)
     plt.close(fig)
@@ -103,20 +109,27 @@ def render_preview(path: Path, mesh: TriangleMesh, sun: np.ndarray, width_px: in
     plotter = pv.Plotter(off_screen=True, window_size=(width_px, int(width_px * 0.7)), lighting="none")
     plotter.set_background("#bcd3ea", top="#5d86b5")
     plotter.add_mesh(surface, color="#f4f7fb", smooth_shading=False, specular=0.1, ambient=0.25, diffuse=0.8)
-    plotter.add_light(pv.Light(position=tuple(centre + sun * size * 10), focal_point=tuple(centre), light_type="scene light"))
+    plotter.add_light(
+        pv.Light(position=tuple(centre + sun * size * 10), focal_point=tuple(centre), light_type="scene light")
+    )
     start = centre + sun * size * 0.15
     plotter.add_mesh(pv.Arrow(start=start, direction=sun, scale=size * 0.45), color="orange", ambient=1.0, diffuse=0.0)
     plotter.add_text(title, font_size=10)
     plotter.add_axes(xlabel="E", ylabel="N", zlabel="up")
     # Look from the south-east and above so north-leaning blades show their lean.
-    plotter.camera_position = [tuple(centre + np.array([0.9, -1.3, 0.9]) * size), tuple(centre - [0, 0, size * 0.1]), (0, 0, 1)]
+    plotter.camera_position = [
+        tuple(centre + np.array([0.9, -1.3, 0.9]) * size),
+        tuple(centre - [0, 0, size * 0.1]),
+        (0, 0, 1),
+    ]
     with atomic_path(path) as tmp:
         plotter.screenshot(str(tmp))
     plotter.close()
 
 
-def save_timelapse(path: Path, snapshots: np.ndarray, snapshot_days: np.ndarray, spacing: float, fps: int,
-                   width_px: int = 640) -> None:
+def save_timelapse(
+    path: Path, snapshots: np.ndarray, snapshot_days: np.ndarray, spacing: float, fps: int, width_px: int = 640
+) -> None:
     """H.264 MP4 of the field growing: hillshade + height colour per snapshot, with the day burned in."""
     import av
     import matplotlib

@@ -3,14 +3,16 @@
 Every writer here writes a temporary file in the destination folder, flushes it to disk and
 renames it over the final name (``os.replace`` is atomic on POSIX within one file system).
 """
+
 from __future__ import annotations
 
 import contextlib
 import json
 import os
 import secrets
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 

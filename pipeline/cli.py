@@ -1,11 +1,11 @@
 """Command-line interface: ``python -m pipeline {validate,run,stages,sweep} ...``."""
+
 from __future__ import annotations
 
 import json
 import logging
 import sys
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 import yaml
@@ -28,7 +28,7 @@ SET_OPTION = typer.Option(
 )
 
 
-def _load_or_exit(config_path: Path, overrides: Optional[List[str]]):
+def _load_or_exit(config_path: Path, overrides: list[str] | None):
     try:
         return load_config(config_path, overrides or [])
     except ConfigError as exc:
@@ -37,7 +37,7 @@ def _load_or_exit(config_path: Path, overrides: Optional[List[str]]):
 
 
 @app.command()
-def validate(config: Path = CONFIG_ARG, overrides: Optional[List[str]] = SET_OPTION) -> None:
+def validate(config: Path = CONFIG_ARG, overrides: list[str] | None = SET_OPTION) -> None:
     """Validate CONFIG and print the resolved config (bases merged, defaults filled in)."""
     cfg = _load_or_exit(config, overrides)
     typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False), nl=False)
@@ -51,17 +51,21 @@ def stages() -> None:
 
     for stage in STAGES:
         typer.echo(f"{stage.name:<10} {stage.description}")
-        typer.echo(f"{'':<10} config keys: {', '.join(stage.config_keys)}; upstream: {', '.join(stage.upstream) or '-'}")
+        typer.echo(
+            f"{'':<10} config keys: {', '.join(stage.config_keys)}; upstream: {', '.join(stage.upstream) or '-'}"
+        )
 
 
 @app.command()
 def run(
     config: Path = CONFIG_ARG,
-    stage: Optional[List[str]] = typer.Option(None, "--stage", help="Run only this stage (repeatable)."),
+    stage: list[str] | None = typer.Option(None, "--stage", help="Run only this stage (repeatable)."),
     force: bool = typer.Option(False, "--force", help="Re-run the selected stages even if up to date."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; warnings and errors only."),
-    resume: bool = typer.Option(False, "--resume", help="Continue interrupted progressive renders from their last checkpoint."),
-    overrides: Optional[List[str]] = SET_OPTION,
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue interrupted progressive renders from their last checkpoint."
+    ),
+    overrides: list[str] | None = SET_OPTION,
 ) -> None:
     """Run the pipeline on CONFIG. Finished stages whose inputs did not change are skipped."""
     setup_logging(quiet)
@@ -88,9 +92,15 @@ def run(
 def sweep(
     ctx: typer.Context,
     sweep_file: Path = typer.Argument(..., help="Sweep YAML file (configs/sweeps/...).", dir_okay=False),
-    cores: Optional[str] = typer.Option(None, "--cores", "-c", help="Cores for local jobs (a number or 'all'); default: the profile's."),
-    profile: Optional[str] = typer.Option(None, "--profile", help="Snakemake profile: a folder, or a name under profiles/ (default, slurm)."),
-    dry_run: bool = typer.Option(False, "--dry-run", "-n", help="Print the jobs Snakemake would run or submit; run nothing."),
+    cores: str | None = typer.Option(
+        None, "--cores", "-c", help="Cores for local jobs (a number or 'all'); default: the profile's."
+    ),
+    profile: str | None = typer.Option(
+        None, "--profile", help="Snakemake profile: a folder, or a name under profiles/ (default, slurm)."
+    ),
+    dry_run: bool = typer.Option(
+        False, "--dry-run", "-n", help="Print the jobs Snakemake would run or submit; run nothing."
+    ),
 ) -> None:
     """Run every point of SWEEP_FILE through the Snakemake workflow, then the sweep summary.
 
@@ -109,7 +119,9 @@ def sweep(
         typer.echo(f"error: snakemake failed (exit {code}); each point's log is in {spec.folder / 'logs'}/", err=True)
         raise typer.Exit(code=code)
     if not dry_run:
-        typer.echo(f"\nSweep '{spec.name}': {len(spec.points)} points; report: {(spec.folder / 'report.html').resolve()}")
+        typer.echo(
+            f"\nSweep '{spec.name}': {len(spec.points)} points; report: {(spec.folder / 'report.html').resolve()}"
+        )
 
 
 def main() -> None:

@@ -10,14 +10,16 @@ Bases are merged in order, then the file itself on top: mappings merge key by ke
 value (lists included) replaces the base's. Errors name the file, or the key path, the value and
 what is allowed.
 """
+
 from __future__ import annotations
 
 import copy
 import hashlib
 import json
 import re
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import yaml
 from pydantic import ValidationError
@@ -70,9 +72,7 @@ def _resolve_base(name: Any, including_file: Path) -> Path:
     for candidate in candidates:
         if candidate.is_file():
             return candidate.resolve()
-    raise ConfigError(
-        f"{including_file}: extends '{name}', which was found neither next to it nor in {CONFIGS_DIR}"
-    )
+    raise ConfigError(f"{including_file}: extends '{name}', which was found neither next to it nor in {CONFIGS_DIR}")
 
 
 def load_raw(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:

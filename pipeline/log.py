@@ -1,4 +1,5 @@
 """Logging that does not break tqdm progress bars."""
+
 from __future__ import annotations
 
 import logging

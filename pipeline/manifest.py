@@ -5,6 +5,7 @@ the stage depends on, the digests of its upstream stages' outputs, the SHA-256 o
 file, the git revision and the timings. A stage is up to date when its manifest's config hash
 and input digests equal the current ones and every listed output is present and unchanged.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -52,7 +53,11 @@ def git_revision() -> str:
         ).stdout.strip()
         dirty = subprocess.run(
             ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=10, check=True,
+            cwd=PROJECT_ROOT,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
         ).stdout.strip()
         return rev + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):

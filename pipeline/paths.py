@@ -1,4 +1,5 @@
 """Well-known locations of the project tree."""
+
 from __future__ import annotations
 
 from pathlib import Path

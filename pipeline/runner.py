@@ -11,16 +11,18 @@ outside the staging swap. The runner owns that folder's life: it is removed befo
 without ``resume`` (a stale checkpoint never leaks into a fresh run) and once the stage's output
 is published.
 """
+
 from __future__ import annotations
 
 import logging
 import os
 import shutil
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from pipeline.atomic import write_json_atomic
 from pipeline.config import config_hash
@@ -170,7 +172,7 @@ def run_stages(
         staging = base / f".{stage.name}.staging-{os.getpid()}"
         staging.mkdir(parents=True)
         log.info("stage %s: running", stage.name)
-        started = datetime.now(timezone.utc)
+        started = datetime.now(UTC)
         t0 = time.perf_counter()
         context = StageContext(
             config=config,

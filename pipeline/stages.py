@@ -3,6 +3,7 @@
 Each stage is a plain function of a StageContext that calls one function of geometry/ or render/.
 Heavy modules are imported inside the functions so that `python -m pipeline validate` stays fast.
 """
+
 from __future__ import annotations
 
 import json
@@ -31,22 +32,31 @@ def scene_stage(ctx: StageContext) -> dict:
 def reference_stage(ctx: StageContext) -> dict:
     from render.mitsuba_ref import run_reference_stage
 
-    return run_reference_stage(ctx.inputs["scene"], ctx.config.reference, ctx.out_dir, seed=ctx.config.seed,
-                               quiet=ctx.quiet)
+    return run_reference_stage(
+        ctx.inputs["scene"], ctx.config.reference, ctx.out_dir, seed=ctx.config.seed, quiet=ctx.quiet
+    )
 
 
 def render_stage(ctx: StageContext) -> dict:
     from render.ptpb_stage import run_render_stage
 
-    return run_render_stage(ctx.inputs["scene"], ctx.config.render, ctx.out_dir, seed=ctx.config.seed,
-                            threads=ctx.config.threads, quiet=ctx.quiet, checkpoint_dir=ctx.checkpoint_dir)
+    return run_render_stage(
+        ctx.inputs["scene"],
+        ctx.config.render,
+        ctx.out_dir,
+        seed=ctx.config.seed,
+        threads=ctx.config.threads,
+        quiet=ctx.quiet,
+        checkpoint_dir=ctx.checkpoint_dir,
+    )
 
 
 def composite_stage(ctx: StageContext) -> dict:
     from render.composite import run_composite_stage
 
-    return run_composite_stage(ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"],
-                               ctx.config.composite, ctx.out_dir)
+    return run_composite_stage(
+        ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"], ctx.config.composite, ctx.out_dir
+    )
 
 
 def compare_stage(ctx: StageContext) -> dict:
@@ -56,24 +66,59 @@ def compare_stage(ctx: StageContext) -> dict:
     stats = json.loads((ctx.inputs["render"] / "stats.json").read_text())
     film = Film(stats["start_opl_m"], stats["bin_width_opl_m"], stats["frame_mode"])
     run_root = ctx.out_dir.parent
-    return run_compare_stage(run_root, ctx.inputs["render"], ctx.inputs.get("reference"), film, ctx.out_dir,
-                             [s.name for s in STAGES], f"Run '{ctx.config.name}'")
+    return run_compare_stage(
+        run_root,
+        ctx.inputs["render"],
+        ctx.inputs.get("reference"),
+        film,
+        ctx.out_dir,
+        [s.name for s in STAGES],
+        f"Run '{ctx.config.name}'",
+    )
 
 
 STAGES: list[Stage] = [
-    Stage("geometry", geometry_stage, ("geometry", "seed"),
-          description="grow the penitente field, mesh it watertight, metrics and previews",
-          enabled=_uses_penitentes),
-    Stage("scene", scene_stage, ("scene", "geometry.latitude", "geometry.start_day_of_year", "geometry.days"),
-          upstream=("geometry",),
-          description="the neutral scene description, meshes and the media's optical quantities"),
-    Stage("reference", reference_stage, ("reference", "seed"), upstream=("scene",),
-          description="Mitsuba 3 volpath steady image and mitransient frames",
-          enabled=lambda c: c.reference.steady or c.reference.transient),
-    Stage("render", render_stage, ("render", "seed", "threads"), upstream=("scene",),
-          description="our PTPB render: steady image, frames and statistics"),
-    Stage("composite", composite_stage, ("composite",), upstream=("render", "reference", "scene"),
-          description="transient videos, streak images, ours against the reference"),
-    Stage("compare", compare_stage, ("composite",), upstream=("render", "reference", "composite"),
-          description="comparison table, error-against-time plot and report.html"),
+    Stage(
+        "geometry",
+        geometry_stage,
+        ("geometry", "seed"),
+        description="grow the penitente field, mesh it watertight, metrics and previews",
+        enabled=_uses_penitentes,
+    ),
+    Stage(
+        "scene",
+        scene_stage,
+        ("scene", "geometry.latitude", "geometry.start_day_of_year", "geometry.days"),
+        upstream=("geometry",),
+        description="the neutral scene description, meshes and the media's optical quantities",
+    ),
+    Stage(
+        "reference",
+        reference_stage,
+        ("reference", "seed"),
+        upstream=("scene",),
+        description="Mitsuba 3 volpath steady image and mitransient frames",
+        enabled=lambda c: c.reference.steady or c.reference.transient,
+    ),
+    Stage(
+        "render",
+        render_stage,
+        ("render", "seed", "threads"),
+        upstream=("scene",),
+        description="our PTPB render: steady image, frames and statistics",
+    ),
+    Stage(
+        "composite",
+        composite_stage,
+        ("composite",),
+        upstream=("render", "reference", "scene"),
+        description="transient videos, streak images, ours against the reference",
+    ),
+    Stage(
+        "compare",
+        compare_stage,
+        ("composite",),
+        upstream=("render", "reference", "composite"),
+        description="comparison table, error-against-time plot and report.html",
+    ),
 ]

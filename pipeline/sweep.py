@@ -28,6 +28,7 @@ renders its own reference then stands for the reference renderer, any other poin
 ``python -m pipeline.sweep summarize runs/sweeps/<sweep>/workflow.yaml`` writes the sweep summary:
 the table (CSV, Markdown, HTML), the poster grid, the error-against-time plot and ``report.html``.
 """
+
 from __future__ import annotations
 
 import csv
@@ -44,14 +45,20 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import yaml
 from pydantic import Field, ValidationError, field_validator
 
 from pipeline.atomic import write_text_atomic
 from pipeline.config import (
-    ConfigError, apply_overrides, format_key_path, format_validation_error, load_raw, parse_override, subtree,
+    ConfigError,
+    apply_overrides,
+    format_key_path,
+    format_validation_error,
+    load_raw,
+    parse_override,
+    subtree,
 )
 from pipeline.paths import CONFIGS_DIR, PROJECT_ROOT
 from pipeline.schema import Config
@@ -88,7 +95,9 @@ def _as_assignments(value: Any) -> list[str]:
 class PointSpec(StrictModel):
     """One point of a sweep file (key path points[i].<field>)."""
 
-    name: str = Field(..., pattern=NAME_PATTERN, max_length=80, description="Point name; its run is <sweep>-<name> [-].")
+    name: str = Field(
+        ..., pattern=NAME_PATTERN, max_length=80, description="Point name; its run is <sweep>-<name> [-]."
+    )
     description: str = Field("", description="What the point is, for the report [-].")
     set: list[str] = Field(default_factory=list, description="Overrides of this point, dotted keys as --set [-].")
 
@@ -98,16 +107,20 @@ class PointSpec(StrictModel):
 class SweepFile(StrictModel):
     """A sweep file: a base config and a list of points or a grid of overrides."""
 
-    name: Optional[str] = Field(None, pattern=NAME_PATTERN, max_length=60, description="Sweep name; default the file stem [-].")
+    name: str | None = Field(
+        None, pattern=NAME_PATTERN, max_length=60, description="Sweep name; default the file stem [-]."
+    )
     description: str = Field("", description="What the sweep compares, for the report [-].")
     base: str = Field(..., min_length=1, description="Base config, next to the sweep file or in configs/ [path].")
-    threads: int = Field(1, ge=1, le=1024, description="C++ core threads of each point; the Snakemake rule's threads [-].")
+    threads: int = Field(
+        1, ge=1, le=1024, description="C++ core threads of each point; the Snakemake rule's threads [-]."
+    )
     set: list[str] = Field(default_factory=list, description="Overrides of every point, dotted keys as --set [-].")
-    points: Optional[list[PointSpec]] = Field(None, description="The points, each a name and its overrides [-].")
-    grid: Optional[dict[str, Any]] = Field(
+    points: list[PointSpec] | None = Field(None, description="The points, each a name and its overrides [-].")
+    grid: dict[str, Any] | None = Field(
         None, description="Dotted key -> list of values (or mapping label -> value); one point per combination [-]."
     )
-    ground_truth: Optional[str] = Field(
+    ground_truth: str | None = Field(
         None, description="Point whose reference renders every point's error is measured against [-]."
     )
 
@@ -139,7 +152,7 @@ class Sweep:
     threads: int
     common: tuple[str, ...]
     points: tuple[SweepPoint, ...]
-    ground_truth: Optional[str]
+    ground_truth: str | None
     runs_dir: Path  # as configured: relative paths are relative to the working directory
 
     @property
@@ -149,6 +162,7 @@ class Sweep:
 
 
 # ---------------------------------------------------------------- loading and validation
+
 
 def _sweep_file_errors(path: Path, error: ValidationError, document: dict) -> list[str]:
     """One line per problem; ``points.2.sett`` becomes ``point 'name': sett``."""
@@ -161,7 +175,7 @@ def _sweep_file_errors(path: Path, error: ValidationError, document: dict) -> li
             given = raw_points[index] if index < len(raw_points) else None
             name = given.get("name") if isinstance(given, dict) else None
             who = f"point '{name}'" if isinstance(name, str) else f"point {index + 1}"
-            line = f"{who}: {line[match.end():]}"
+            line = f"{who}: {line[match.end() :]}"
         lines.append(f"{path}: {line.strip()}")
     return lines
 
@@ -190,7 +204,7 @@ def _label(value: Any) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(value)).strip("_.") or "x"
 
 
-def _check_key_exists(dump: dict, keys: list[str]) -> Optional[str]:
+def _check_key_exists(dump: dict, keys: list[str]) -> str | None:
     """Why the dotted key is not a key of the resolved base config, or None when it is.
 
     The walk stops at an unset optional section (``physical: null``): pydantic checks below it.
@@ -263,8 +277,10 @@ def load_sweep(path: str | Path) -> Sweep:
     for index, point in enumerate(specs, 1):
         if point.name in seen:
             hint = "; name the grid's values with a mapping (label: value)" if spec.grid else ""
-            raise SweepError(f"{path}: point '{point.name}' appears twice (points {seen[point.name]} and {index}); "
-                             f"point names must be unique{hint}")
+            raise SweepError(
+                f"{path}: point '{point.name}' appears twice (points {seen[point.name]} and {index}); "
+                f"point names must be unique{hint}"
+            )
         seen[point.name] = index
 
     base_path = _resolve_base(spec.base, path)
@@ -306,14 +322,22 @@ def load_sweep(path: str | Path) -> Sweep:
     if errors:
         raise SweepError("\n".join(errors))
     if spec.ground_truth is not None and spec.ground_truth not in seen:
-        raise SweepError(f"{path}: ground_truth: '{spec.ground_truth}' is not a point of the sweep "
-                         f"({', '.join(seen)})")
-    return Sweep(path=path, name=name, description=spec.description.strip(), base=base_path, threads=spec.threads,
-                 common=tuple(spec.set), points=tuple(points), ground_truth=spec.ground_truth,
-                 runs_dir=Path(common_config.runs_dir))
+        raise SweepError(f"{path}: ground_truth: '{spec.ground_truth}' is not a point of the sweep ({', '.join(seen)})")
+    return Sweep(
+        path=path,
+        name=name,
+        description=spec.description.strip(),
+        base=base_path,
+        threads=spec.threads,
+        common=tuple(spec.set),
+        points=tuple(points),
+        ground_truth=spec.ground_truth,
+        runs_dir=Path(common_config.runs_dir),
+    )
 
 
 # ---------------------------------------------------------------- files for Snakemake
+
 
 def write_if_changed(path: Path, text: str) -> bool:
     """Write ``text`` atomically unless the file already holds it (its mtime then stays); True if written."""
@@ -341,8 +365,11 @@ def prepare(sweep: Sweep, workdir: Path | None = None) -> Path:
     """Write the point configs and the workflow's config file; return the latter's path."""
     workdir = (workdir or Path.cwd()).resolve()
     folder = (workdir / sweep.folder).resolve()
-    written = [p.name for p in sweep.points
-               if write_if_changed(folder / "points" / f"{p.name}.yaml", point_config_text(sweep, p))]
+    written = [
+        p.name
+        for p in sweep.points
+        if write_if_changed(folder / "points" / f"{p.name}.yaml", point_config_text(sweep, p))
+    ]
     if written:
         log.info("sweep %s: point configs written for %s", sweep.name, ", ".join(written))
     names = {p.name for p in sweep.points}
@@ -364,29 +391,50 @@ def prepare(sweep: Sweep, workdir: Path | None = None) -> Path:
         "points": {p.name: {"overrides": list(p.overrides), "description": p.description} for p in sweep.points},
     }
     workflow_yaml = folder / "workflow.yaml"
-    write_if_changed(workflow_yaml, "# Written by `python -m pipeline sweep`: the Snakemake workflow's config.\n"
-                     + yaml.safe_dump(spec, sort_keys=False))
+    write_if_changed(
+        workflow_yaml,
+        "# Written by `python -m pipeline sweep`: the Snakemake workflow's config.\n"
+        + yaml.safe_dump(spec, sort_keys=False),
+    )
     return workflow_yaml
 
 
-def resolve_profile(profile: Optional[str]) -> Path:
+def resolve_profile(profile: str | None) -> Path:
     """A profile folder as given, or by name under the project's profiles/ (default: profiles/default)."""
     candidate = Path(profile) if profile else PROFILES_DIR / "default"
     if not candidate.is_dir() and profile and (PROFILES_DIR / profile).is_dir():
         candidate = PROFILES_DIR / profile
     if not (candidate / "config.yaml").is_file():
         known = ", ".join(sorted(p.name for p in PROFILES_DIR.iterdir() if (p / "config.yaml").is_file()))
-        raise SweepError(f"profile '{profile}' is neither a folder with a config.yaml nor one of the project's "
-                         f"profiles ({known})")
+        raise SweepError(
+            f"profile '{profile}' is neither a folder with a config.yaml nor one of the project's profiles ({known})"
+        )
     return candidate.resolve()
 
 
-def snakemake_command(workflow_yaml: Path, cores: Optional[str] = None, profile: Optional[str] = None,
-                      dry_run: bool = False, extra: tuple[str, ...] | list[str] = ()) -> list[str]:
+def snakemake_command(
+    workflow_yaml: Path,
+    cores: str | None = None,
+    profile: str | None = None,
+    dry_run: bool = False,
+    extra: tuple[str, ...] | list[str] = (),
+) -> list[str]:
     spec = yaml.safe_load(workflow_yaml.read_text(encoding="utf-8"))
-    command = [sys.executable, "-m", "snakemake", "--snakefile", str(SNAKEFILE), "--directory", spec["folder"],
-               "--configfile", str(workflow_yaml), "--workflow-profile", "none",
-               "--profile", str(resolve_profile(profile))]
+    command = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "--snakefile",
+        str(SNAKEFILE),
+        "--directory",
+        spec["folder"],
+        "--configfile",
+        str(workflow_yaml),
+        "--workflow-profile",
+        "none",
+        "--profile",
+        str(resolve_profile(profile)),
+    ]
     if cores:
         command += ["--cores", str(cores)]
     if dry_run:
@@ -394,8 +442,13 @@ def snakemake_command(workflow_yaml: Path, cores: Optional[str] = None, profile:
     return command + list(extra)
 
 
-def run_sweep(sweep: Sweep, cores: Optional[str] = None, profile: Optional[str] = None, dry_run: bool = False,
-              extra: tuple[str, ...] | list[str] = ()) -> int:
+def run_sweep(
+    sweep: Sweep,
+    cores: str | None = None,
+    profile: str | None = None,
+    dry_run: bool = False,
+    extra: tuple[str, ...] | list[str] = (),
+) -> int:
     """Run the sweep's Snakemake workflow (Snakemake prints to this process's terminal); its exit code."""
     if importlib.util.find_spec("snakemake") is None:
         raise SweepError("snakemake is not installed in this environment; install requirements.lock into it")
@@ -407,6 +460,7 @@ def run_sweep(sweep: Sweep, cores: Optional[str] = None, profile: Optional[str] 
 
 # ---------------------------------------------------------------- summary
 
+
 @dataclass
 class _PointFiles:
     """Reads a point's stage outputs; a missing file of an enabled stage logs a warning and gives None."""
@@ -415,7 +469,7 @@ class _PointFiles:
     run_dir: Path
     enabled: set[str]
 
-    def path(self, stage: str, name: str) -> Optional[Path]:
+    def path(self, stage: str, name: str) -> Path | None:
         if stage not in self.enabled:
             return None
         path = self.run_dir / stage / name
@@ -447,7 +501,7 @@ class _PointFiles:
             return None
 
 
-def _number(value: Any) -> Optional[float]:
+def _number(value: Any) -> float | None:
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -455,7 +509,7 @@ def _number(value: Any) -> Optional[float]:
     return number if number == number and abs(number) != float("inf") else None
 
 
-def _compare_errors(files: _PointFiles) -> dict[str, Optional[float]]:
+def _compare_errors(files: _PointFiles) -> dict[str, float | None]:
     """relMSE of ours (steady, frames) against the point's own reference, from compare/comparison.csv."""
     errors = {"relmse_steady": None, "relmse_frames": None}
     path = files.path("compare", "comparison.csv")
@@ -470,14 +524,19 @@ def _compare_errors(files: _PointFiles) -> dict[str, Optional[float]]:
     return errors
 
 
-def _relmse(estimate, reference, what: str, point: str) -> Optional[float]:
+def _relmse(estimate, reference, what: str, point: str) -> float | None:
     from render.metrics import relmse
 
     if estimate is None or reference is None:
         return None
     if estimate.shape != reference.shape:
-        log.warning("sweep summary: point '%s': %s has shape %s, the ground truth %s; no error computed",
-                    point, what, estimate.shape, reference.shape)
+        log.warning(
+            "sweep summary: point '%s': %s has shape %s, the ground truth %s; no error computed",
+            point,
+            what,
+            estimate.shape,
+            reference.shape,
+        )
         return None
     return relmse(estimate, reference)
 
@@ -489,7 +548,7 @@ def _frames_as_bins(frames, stats: dict):
     return frames * stats["bin_width_opl_m"]
 
 
-def _triple_columns(prefix: str, values) -> dict[str, Optional[float]]:
+def _triple_columns(prefix: str, values) -> dict[str, float | None]:
     values = values if isinstance(values, (list, tuple)) and len(values) == 3 else [None] * 3
     return {f"{prefix}_{channel}": _number(v) for channel, v in zip("rgb", values)}
 
@@ -505,8 +564,9 @@ def _input_value(dump: dict, key: str) -> Any:
     return json.dumps(value)
 
 
-def _point_row(spec: dict, name: str, input_keys: list[str],
-               truth: Optional[dict]) -> tuple[dict[str, Any], _PointFiles, dict]:
+def _point_row(
+    spec: dict, name: str, input_keys: list[str], truth: dict | None
+) -> tuple[dict[str, Any], _PointFiles, dict]:
     """One row: the point's inputs (every key some point overrides), times, errors, albedo, optics."""
     from pipeline.config import load_config
     from pipeline.stages import STAGES
@@ -523,11 +583,13 @@ def _point_row(spec: dict, name: str, input_keys: list[str],
     stats = files.read_json("render", "stats.json")
     timing = files.read_json("reference", "timing.json")
     steady_timing, transient_timing = timing.get("steady") or {}, timing.get("transient") or {}
-    row.update({
-        "frame_mode": stats.get("frame_mode"),
-        "render_s": _number(stats.get("time_total_s", stats.get("seconds"))),
-        "iterations": stats.get("iterations"),
-    })
+    row.update(
+        {
+            "frame_mode": stats.get("frame_mode"),
+            "render_s": _number(stats.get("time_total_s", stats.get("seconds"))),
+            "iterations": stats.get("iterations"),
+        }
+    )
     extras = {"steady_timing": steady_timing, "transient_timing": transient_timing}
     row["reference_steady_s"] = _number(steady_timing.get("seconds"))
     row["reference_transient_s"] = _number(transient_timing.get("seconds"))
@@ -584,16 +646,19 @@ def write_table(rows: list[dict[str, Any]], folder: Path, title: str) -> dict[st
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(columns)
     # Full precision in the CSV; four digits for people in Markdown and HTML.
-    writer.writerows([["" if r.get(c) is None else repr(r[c]) if isinstance(r[c], float) else r[c] for c in columns]
-                      for r in rows])
+    writer.writerows(
+        [["" if r.get(c) is None else repr(r[c]) if isinstance(r[c], float) else r[c] for c in columns] for r in rows]
+    )
     write_text_atomic(paths["csv"], buffer.getvalue())
     write_text_atomic(paths["html"], _page(title, STYLE, markdown_table_to_html(markdown)))
     return paths
 
 
 def _page(title: str, style: str, body: str) -> str:
-    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-            f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n")
+    return (
+        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n"
+    )
 
 
 def _sigma_label(key: str, entry: dict) -> str:
@@ -614,8 +679,12 @@ def write_poster(points: list[tuple[str, Any, str]], path: Path, title: str) -> 
         shape = images[0][1].shape
         for name, image, _ in images:
             if image.shape != shape:
-                log.warning("sweep summary: point '%s': its render is %s, not %s; left out of the poster",
-                            name, image.shape, shape)
+                log.warning(
+                    "sweep summary: point '%s': its render is %s, not %s; left out of the poster",
+                    name,
+                    image.shape,
+                    shape,
+                )
         images = [item for item in images if item[1].shape == shape]
     if not images:
         log.warning("sweep summary: no steady render found; the poster is a placeholder")
@@ -630,12 +699,14 @@ def write_poster(points: list[tuple[str, Any, str]], path: Path, title: str) -> 
                 fig.savefig(tmp)
         plt.close(fig)
         return
-    poster_grid([i for _, i, _ in images], [label for _, _, label in images], path,
-                columns=min(4, len(images)), title=title)
+    poster_grid(
+        [i for _, i, _ in images], [label for _, _, label in images], path, columns=min(4, len(images)), title=title
+    )
 
 
-def _error_series(spec: dict, rows: list[dict], extras: dict[str, dict], files: dict[str, _PointFiles],
-                  truth: Optional[dict]) -> dict[str, list[dict[str, float]]]:
+def _error_series(
+    spec: dict, rows: list[dict], extras: dict[str, dict], files: dict[str, _PointFiles], truth: dict | None
+) -> dict[str, list[dict[str, float]]]:
     """With a ground truth: one line per method across points; without: each point's convergence
     (its steady snapshots against its own steady reference)."""
     import numpy as np
@@ -655,10 +726,18 @@ def _error_series(spec: dict, rows: list[dict], extras: dict[str, dict], files: 
                 continue
             if extra["steady_timing"] or extra["transient_timing"]:
                 # A point that renders its own reference measures the reference renderer.
-                add("mitransient, frames", row.get("reference_transient_s"), extra["transient_timing"].get("spp"),
-                    row.get("reference_relmse_frames"))
-                add("Mitsuba volpath, steady", row.get("reference_steady_s"), extra["steady_timing"].get("spp"),
-                    row.get("reference_relmse_steady"))
+                add(
+                    "mitransient, frames",
+                    row.get("reference_transient_s"),
+                    extra["transient_timing"].get("spp"),
+                    row.get("reference_relmse_frames"),
+                )
+                add(
+                    "Mitsuba volpath, steady",
+                    row.get("reference_steady_s"),
+                    extra["steady_timing"].get("spp"),
+                    row.get("reference_relmse_steady"),
+                )
                 continue
             mode = row.get("frame_mode") or "?"
             add(f"ours ({mode}), frames", row.get("render_s"), row.get("iterations"), row.get("relmse_frames"))
@@ -684,35 +763,54 @@ def _report(spec: dict, rows: list[dict], table_md: Path, folder: Path, has_erro
 
     rel = lambda p: html.escape(os.path.relpath(p, folder))  # noqa: E731
     truth = spec.get("ground_truth")
-    against = (f"the reference renders of point '{truth}'" if truth else "each point's own reference")
+    against = f"the reference renders of point '{truth}'" if truth else "each point's own reference"
     parts = []
     if spec.get("description"):
         parts.append(f"<p>{html.escape(spec['description'])}</p>")
-    parts.append(f"<p>Sweep file <code>{html.escape(spec['sweep_file'])}</code>; {len(rows)} points; "
-                 f"errors (relMSE) are against {html.escape(against)}. "
-                 f"Regenerate with <code>python -m pipeline sweep {html.escape(spec['sweep_file'])}</code>.</p>")
+    parts.append(
+        f"<p>Sweep file <code>{html.escape(spec['sweep_file'])}</code>; {len(rows)} points; "
+        f"errors (relMSE) are against {html.escape(against)}. "
+        f"Regenerate with <code>python -m pipeline sweep {html.escape(spec['sweep_file'])}</code>.</p>"
+    )
     if spec.get("common"):
-        parts.append("<p>Every point sets: " + ", ".join(f"<code>{html.escape(key)}={html.escape(value)}</code>"
-                                                        for key, value in _overrides_for_people(spec["common"]))
-                     + "</p>")
-    parts.append("<h2>Summary</h2><div style='overflow-x: auto'>"
-                 + markdown_table_to_html(table_md.read_text(encoding="utf-8")) + "</div>")
-    parts.append("<p>" + " · ".join(f'<a href="{n}">{n}</a>' for n in ("summary.csv", "summary.md", "summary.html"))
-                 + "</p>")
-    parts.append('<h2>Poster</h2><figure><a href="poster.pdf"><img src="poster.png" alt="poster grid"></a>'
-                 "<figcaption>ours, steady, one exposure for all points</figcaption></figure>")
+        parts.append(
+            "<p>Every point sets: "
+            + ", ".join(
+                f"<code>{html.escape(key)}={html.escape(value)}</code>"
+                for key, value in _overrides_for_people(spec["common"])
+            )
+            + "</p>"
+        )
+    parts.append(
+        "<h2>Summary</h2><div style='overflow-x: auto'>"
+        + markdown_table_to_html(table_md.read_text(encoding="utf-8"))
+        + "</div>"
+    )
+    parts.append(
+        "<p>" + " · ".join(f'<a href="{n}">{n}</a>' for n in ("summary.csv", "summary.md", "summary.html")) + "</p>"
+    )
+    parts.append(
+        '<h2>Poster</h2><figure><a href="poster.pdf"><img src="poster.png" alt="poster grid"></a>'
+        "<figcaption>ours, steady, one exposure for all points</figcaption></figure>"
+    )
     if has_error_plot:
-        parts.append('<h2>Error against time</h2><figure><a href="error_vs_time.pdf">'
-                     '<img src="error_vs_time.png" alt="error against time"></a></figure>')
+        parts.append(
+            '<h2>Error against time</h2><figure><a href="error_vs_time.pdf">'
+            '<img src="error_vs_time.png" alt="error against time"></a></figure>'
+        )
     items = []
     for row in rows:
         name = row["point"]
         run = Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}"
-        links = [f'<a href="{rel(run / "compare" / "report.html")}">run report</a>',
-                 f'<a href="{rel(folder / "points" / f"{name}.yaml")}">config</a>',
-                 f'<a href="{rel(folder / "logs" / f"{name}.log")}">log</a>']
-        overrides = ", ".join(f"<code>{html.escape(key)}={html.escape(value)}</code>"
-                              for key, value in _overrides_for_people(spec["points"][name]["overrides"]))
+        links = [
+            f'<a href="{rel(run / "compare" / "report.html")}">run report</a>',
+            f'<a href="{rel(folder / "points" / f"{name}.yaml")}">config</a>',
+            f'<a href="{rel(folder / "logs" / f"{name}.log")}">log</a>',
+        ]
+        overrides = ", ".join(
+            f"<code>{html.escape(key)}={html.escape(value)}</code>"
+            for key, value in _overrides_for_people(spec["points"][name]["overrides"])
+        )
         description = html.escape(spec["points"][name].get("description") or "")
         items.append(f"<li><b>{html.escape(name)}</b> {description} {overrides} — {' · '.join(links)}</li>")
     parts.append("<h2>Points</h2><ul>" + "".join(items) + "</ul>")
@@ -727,18 +825,26 @@ def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
     if spec.get("ground_truth"):
         name = spec["ground_truth"]
         truth_files = _PointFiles(name, Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}", {"reference"})
-        truth = {"steady": truth_files.read_array("reference", "steady.npy"),
-                 "frames": truth_files.read_array("reference", "frames.npy")}
-    input_keys = list(dict.fromkeys(key for point in spec["points"].values()
-                                    for key, _ in _overrides_for_people(point["overrides"])))
+        truth = {
+            "steady": truth_files.read_array("reference", "steady.npy"),
+            "frames": truth_files.read_array("reference", "frames.npy"),
+        }
+    input_keys = list(
+        dict.fromkeys(key for point in spec["points"].values() for key, _ in _overrides_for_people(point["overrides"]))
+    )
     rows, extras, files, images = [], {}, {}, []
     for name in spec["points"]:
         row, point_files, extra = _point_row(spec, name, input_keys, truth)
         rows.append(row)
         extras[name], files[name] = extra, point_files
-        label = name + "".join(f"\n{key.split('.')[-1]}={value}" for key, value
-                               in _overrides_for_people(spec["points"][name]["overrides"]) if value != name)
-        label += "".join(_sigma_label(key, medium) for key, medium in point_files.read_json("scene", "optics.json").items())
+        label = name + "".join(
+            f"\n{key.split('.')[-1]}={value}"
+            for key, value in _overrides_for_people(spec["points"][name]["overrides"])
+            if value != name
+        )
+        label += "".join(
+            _sigma_label(key, medium) for key, medium in point_files.read_json("scene", "optics.json").items()
+        )
         images.append((name, point_files.read_array("render", "steady.npy"), label))
     title = f"Sweep '{spec['sweep']}'"
     paths = write_table(rows, folder, title)

@@ -1,5 +1,6 @@
 """Compare our render with the reference: a table (Markdown, CSV), error-against-time plots and the
 run report. relMSE and RMSE are against the Mitsuba steady image and the mitransient frames."""
+
 from __future__ import annotations
 
 import json
@@ -12,8 +13,18 @@ from pipeline.atomic import write_text_atomic
 from render.figures import error_curves
 from render.metrics import mean_radiance, relmse, rmse
 
-COLUMNS = ["renderer", "quantity", "seconds", "iterations_or_spp", "relmse", "rmse",
-           "mean_r", "mean_g", "mean_b", "peak_memory_mib"]
+COLUMNS = [
+    "renderer",
+    "quantity",
+    "seconds",
+    "iterations_or_spp",
+    "relmse",
+    "rmse",
+    "mean_r",
+    "mean_g",
+    "mean_b",
+    "peak_memory_mib",
+]
 
 
 def _read_json(path: Path) -> dict[str, Any]:
@@ -28,9 +39,18 @@ def _load(folder: Path | None, name: str) -> np.ndarray | None:
 
 def _row(renderer, quantity, seconds, count, image, reference, memory) -> dict[str, Any]:
     means = mean_radiance(image)
-    row = {"renderer": renderer, "quantity": quantity, "seconds": seconds, "iterations_or_spp": count,
-           "mean_r": means[0], "mean_g": means[1], "mean_b": means[2], "peak_memory_mib": memory,
-           "relmse": None, "rmse": None}
+    row = {
+        "renderer": renderer,
+        "quantity": quantity,
+        "seconds": seconds,
+        "iterations_or_spp": count,
+        "mean_r": means[0],
+        "mean_g": means[1],
+        "mean_b": means[2],
+        "peak_memory_mib": memory,
+        "relmse": None,
+        "rmse": None,
+    }
     if reference is not None and reference.shape == image.shape:
         row["relmse"] = relmse(image, reference)
         row["rmse"] = rmse(image, reference)
@@ -68,16 +88,43 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, film, out
         rows.append(_row("ours (PTPB)", "steady", ours_seconds, ours_iterations, steady_ours, steady_ref, ours_memory))
     if frames_ours is not None:
         as_bins = frames_ours * film.bin_width_opl if film.frame_mode == "gate" else frames_ours
-        rows.append(_row("ours (PTPB)", f"frames ({film.frame_mode})", ours_seconds, ours_iterations, as_bins,
-                         frames_ref, ours_memory))
+        rows.append(
+            _row(
+                "ours (PTPB)",
+                f"frames ({film.frame_mode})",
+                ours_seconds,
+                ours_iterations,
+                as_bins,
+                frames_ref,
+                ours_memory,
+            )
+        )
     if steady_ref is not None:
         steady_t = ref_timing.get("steady", {})
-        rows.append(_row("Mitsuba volpath", "steady", steady_t.get("seconds"), steady_t.get("spp"), steady_ref,
-                         None, steady_t.get("peak_memory_mib")))
+        rows.append(
+            _row(
+                "Mitsuba volpath",
+                "steady",
+                steady_t.get("seconds"),
+                steady_t.get("spp"),
+                steady_ref,
+                None,
+                steady_t.get("peak_memory_mib"),
+            )
+        )
     if frames_ref is not None:
         transient_t = ref_timing.get("transient", {})
-        rows.append(_row("mitransient", "frames (bins)", transient_t.get("seconds"), transient_t.get("spp"),
-                         frames_ref, None, transient_t.get("peak_memory_mib")))
+        rows.append(
+            _row(
+                "mitransient",
+                "frames (bins)",
+                transient_t.get("seconds"),
+                transient_t.get("spp"),
+                frames_ref,
+                None,
+                transient_t.get("peak_memory_mib"),
+            )
+        )
     if not rows:
         raise FileNotFoundError("compare found neither our render nor a reference to tabulate")
     write_table(rows, out_dir)
@@ -87,14 +134,16 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, film, out
         with np.load(snapshots) as z:
             series["ours (PTPB), steady"] = [
                 {"seconds": float(t), "iterations": int(i), "relmse": relmse(image, steady_ref)}
-                for i, t, image in zip(z["iterations"], z["seconds"], z["steady"])]
+                for i, t, image in zip(z["iterations"], z["seconds"], z["steady"])
+            ]
     if series:
         error_curves(series, out_dir / "error_vs_time.png")
     return {"rows": rows, "error_curves": {k: v for k, v in series.items()}}
 
 
-def run_compare_stage(run_root: Path, ours_dir: Path | None, reference_dir: Path | None, film, out_dir: Path,
-                      stage_names, title: str) -> dict:
+def run_compare_stage(
+    run_root: Path, ours_dir: Path | None, reference_dir: Path | None, film, out_dir: Path, stage_names, title: str
+) -> dict:
     """The `compare` stage: the table, the error plot and ``report.html`` linking every stage's files."""
     from render.report import write_report
 

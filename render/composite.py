@@ -1,6 +1,7 @@
 """Transient frames -> videos (light in flight, and light filling the scene), streak images and
 side-by-side comparisons. Pure array work plus the writers in render.video and render.figures.
 """
+
 from __future__ import annotations
 
 import json
@@ -99,7 +100,12 @@ def streak_images(frames: np.ndarray, film: Film, cfg, out_dir: Path, stem: str 
 
 
 def side_by_side(
-    a_frames: np.ndarray, b_frames: np.ndarray, labels: tuple[str, str], film: Film, cfg, out_dir: Path,
+    a_frames: np.ndarray,
+    b_frames: np.ndarray,
+    labels: tuple[str, str],
+    film: Film,
+    cfg,
+    out_dir: Path,
     stem: str = "side_by_side",
 ) -> dict[str, Path]:
     """Video and still of two frame stacks with a relative-difference heat-map panel."""
@@ -118,12 +124,27 @@ def side_by_side(
         diff = relative_difference(a_frames[k], b_frames[k], floor=0.01 * float(np.mean(b_frames)) + 1e-12)
         heat = (colormap(np.clip(diff / cfg.difference_vmax, 0, 1))[..., :3] * 255).astype(np.uint8)
         row = np.concatenate([upscale(p, cfg.video_min_height // 2) for p in (a, b, heat)], axis=1)
-        panels.append(annotate(row, [f"{labels[0]} | {labels[1]} | rel. diff 0 to {cfg.difference_vmax:g}",
-                                     format_time(film.centre(k), cfg.time_unit)]))
+        panels.append(
+            annotate(
+                row,
+                [
+                    f"{labels[0]} | {labels[1]} | rel. diff 0 to {cfg.difference_vmax:g}",
+                    format_time(film.centre(k), cfg.time_unit),
+                ],
+            )
+        )
     paths = {"side_by_side_video": write_mp4(out_dir / f"{stem}.mp4", np.stack(panels), _frame_rate(cfg, film))}
     still = out_dir / f"{stem}.png"
-    side_by_side_still(a_frames.sum(axis=0), b_frames.sum(axis=0), labels, exposure_scale(b_frames.sum(axis=0), cfg.exposure_percentile),
-                       still, cfg.tone_curve, title="Sum over all frames", vmax=cfg.difference_vmax)
+    side_by_side_still(
+        a_frames.sum(axis=0),
+        b_frames.sum(axis=0),
+        labels,
+        exposure_scale(b_frames.sum(axis=0), cfg.exposure_percentile),
+        still,
+        cfg.tone_curve,
+        title="Sum over all frames",
+        vmax=cfg.difference_vmax,
+    )
     paths["side_by_side_still"] = still
     return paths
 
@@ -154,11 +175,18 @@ def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir:
         # mitransient's frames are bin integrals; gate frames are densities per metre (ptpb.md §2).
         ours_as_bins = frames * film.bin_width_opl if film.frame_mode == "gate" else frames
         bins_film = Film(film.start_opl, film.bin_width_opl, "bins")
-        written.update(side_by_side(ours_as_bins, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg,
-                                    out_dir))
-        written.update(transient_videos(reference_frames, bins_film, cfg, out_dir, stem="reference_transient",
-                                        metres_per_pixel=metres_per_pixel))
+        written.update(
+            side_by_side(ours_as_bins, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg, out_dir)
+        )
+        written.update(
+            transient_videos(
+                reference_frames, bins_film, cfg, out_dir, stem="reference_transient", metres_per_pixel=metres_per_pixel
+            )
+        )
     elif reference_frames is not None:
         log.warning("reference frames %s do not match ours %s; no side-by-side", reference_frames.shape, frames.shape)
-    return {"files": sorted(p.name for p in written.values()), "frames": int(frames.shape[0]),
-            "frame_mode": film.frame_mode}
+    return {
+        "files": sorted(p.name for p in written.values()),
+        "frames": int(frames.shape[0]),
+        "frame_mode": film.frame_mode,
+    }

@@ -1,4 +1,5 @@
 """OpenEXR images through OpenImageIO, written atomically: float32 RGB (H, W, 3) arrays."""
+
 from __future__ import annotations
 
 import os
@@ -19,7 +20,8 @@ def write_exr(path: str | os.PathLike[str], array: np.ndarray, *, channels: tupl
         raise ValueError(f"write_exr needs an (H, W) or (H, W, C) array, got shape {image.shape}")
     height, width, nchannels = image.shape
     names = channels or {1: ("Y",), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}.get(
-        nchannels, tuple(f"C{i}" for i in range(nchannels)))
+        nchannels, tuple(f"C{i}" for i in range(nchannels))
+    )
     spec = oiio.ImageSpec(width, height, nchannels, oiio.FLOAT)
     spec.channelnames = tuple(names)
     spec.attribute("compression", "zip")

@@ -3,10 +3,11 @@
 Every function writes its files atomically and returns the paths it wrote. Figures are saved as
 PNG, and as PDF too where they are meant for print (error curves, poster grids).
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import matplotlib
 
@@ -55,8 +56,13 @@ def streak_image(
     t0_ps = start_opl * PS_PER_M_OPL
     t1_ps = (start_opl + t_count * bin_width_opl) * PS_PER_M_OPL
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    ax.imshow(to_display(slab, scale, curve), aspect="auto", origin="lower",
-              extent=(0, extent_space, t0_ps, t1_ps), interpolation="nearest")
+    ax.imshow(
+        to_display(slab, scale, curve),
+        aspect="auto",
+        origin="lower",
+        extent=(0, extent_space, t0_ps, t1_ps),
+        interpolation="nearest",
+    )
     ax.set_xlabel(label)
     ax.set_ylabel("time (ps)")
     ax.set_title(f"Streak image ({axis}–t)")
@@ -72,8 +78,14 @@ def relative_difference(a: np.ndarray, b: np.ndarray, floor: float | None = None
 
 
 def side_by_side_still(
-    a: np.ndarray, b: np.ndarray, labels: tuple[str, str], scale: float, path: Path,
-    curve: ToneCurve = "reinhard", title: str | None = None, vmax: float = 1.0,
+    a: np.ndarray,
+    b: np.ndarray,
+    labels: tuple[str, str],
+    scale: float,
+    path: Path,
+    curve: ToneCurve = "reinhard",
+    title: str | None = None,
+    vmax: float = 1.0,
 ) -> list[Path]:
     """Two images and the heat map of their relative difference, with a colour bar."""
     if a.shape != b.shape:
@@ -93,9 +105,7 @@ def side_by_side_still(
     return _save(fig, path)
 
 
-def error_curves(
-    series: Mapping[str, Sequence[Mapping[str, float]]], path: Path, metric: str = "relmse"
-) -> list[Path]:
+def error_curves(series: Mapping[str, Sequence[Mapping[str, float]]], path: Path, metric: str = "relmse") -> list[Path]:
     """Error against wall time and against iterations (or spp), log–log, one line per renderer.
 
     ``series[name]`` is a list of points with keys ``seconds``, ``iterations`` and ``metric``.
@@ -124,8 +134,13 @@ def error_curves(
 
 
 def poster_grid(
-    images: Sequence[np.ndarray], labels: Sequence[str], path: Path, curve: ToneCurve = "reinhard",
-    columns: int = 3, title: str | None = None, percentile: float = 99.5,
+    images: Sequence[np.ndarray],
+    labels: Sequence[str],
+    path: Path,
+    curve: ToneCurve = "reinhard",
+    columns: int = 3,
+    title: str | None = None,
+    percentile: float = 99.5,
 ) -> list[Path]:
     """A labelled grid of renders sharing one exposure, so brightness compares across panels."""
     from render.tonemap import exposure_scale
@@ -145,8 +160,9 @@ def poster_grid(
     return _save(fig, path, pdf=True)
 
 
-def rendered_image(image: np.ndarray, path: Path, title: str, curve: ToneCurve = "filmic",
-                   percentile: float = 99.5) -> list[Path]:
+def rendered_image(
+    image: np.ndarray, path: Path, title: str, curve: ToneCurve = "filmic", percentile: float = 99.5
+) -> list[Path]:
     """One tone-mapped render with a title, e.g. a stage's steady image."""
     from render.tonemap import exposure_scale
 

@@ -1,4 +1,5 @@
 """Error metrics between a render and a reference, as used in every comparison table."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -17,6 +17,7 @@ Conventions, on top of render/scene.py and ptpb.md §1-§2:
 - Rendering goes in passes of ``spp_per_pass``; pass i uses seed + i (Mitsuba adds the sampler's
   ``seed`` to ``render``'s seed, so the dict holds ``seed`` and pass i renders with seed=i).
 """
+
 from __future__ import annotations
 
 import importlib
@@ -25,7 +26,7 @@ import math
 import resource
 import time
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -49,6 +50,7 @@ class ReferenceRefused(ValueError):
 
 # ---------------------------------------------------------------- variants
 
+
 def use_variant(preferred: str = "llvm_ad_rgb", *, transient: bool) -> str:
     """Set a Mitsuba variant and return its name; transient renders also import mitransient.
 
@@ -64,11 +66,13 @@ def use_variant(preferred: str = "llvm_ad_rgb", *, transient: bool) -> str:
             raise RuntimeError(
                 f"the transient reference needs Mitsuba's llvm_ad_rgb variant (mitransient registers its plugins "
                 f"only under llvm/cuda variants), but it cannot be set: {err}. Install libllvm19 or point "
-                "DRJIT_LIBLLVM_PATH at a recent libLLVM, or set reference.transient: false") from err
+                "DRJIT_LIBLLVM_PATH at a recent libLLVM, or set reference.transient: false"
+            ) from err
         if wanted == "scalar_rgb":
             raise
-        log.warning("Mitsuba variant %s is unavailable (%s); rendering the steady reference with scalar_rgb",
-                    wanted, err)
+        log.warning(
+            "Mitsuba variant %s is unavailable (%s); rendering the steady reference with scalar_rgb", wanted, err
+        )
         mi.set_variant("scalar_rgb")
     if transient:
         importlib.import_module("mitransient")
@@ -76,6 +80,7 @@ def use_variant(preferred: str = "llvm_ad_rgb", *, transient: bool) -> str:
 
 
 # ---------------------------------------------------------------- scene export
+
 
 def _bounding_sphere(scene: Scene, scene_dir: Path) -> tuple[np.ndarray, float]:
     if scene.bounding_sphere is not None:
@@ -102,8 +107,13 @@ def disk_sun(light: dict[str, Any], centre: np.ndarray, radius: float) -> dict[s
     alpha = math.radians(float(light["angular_diameter_deg"])) / 2
     # Projected solid angle π sin²α (not 2π(1 - cos α)): a plane at C facing the sun then gets exactly E.
     radiance = np.asarray(light["irradiance"], np.float64) / (math.pi * math.sin(alpha) ** 2)
-    return {"center": centre + distance * s, "normal": -s, "radius": distance * math.tan(alpha),
-            "distance": distance, "radiance": radiance}
+    return {
+        "center": centre + distance * s,
+        "normal": -s,
+        "radius": distance * math.tan(alpha),
+        "distance": distance,
+        "radiance": radiance,
+    }
 
 
 def _timed_emitters(scene: Scene) -> list[str]:
@@ -133,8 +143,13 @@ def _medium_dict(medium) -> dict[str, Any]:
     sigma_t = sigma_s + np.asarray(medium.sigma_a, np.float64)
     albedo = np.divide(sigma_s, sigma_t, out=np.zeros(3), where=sigma_t > 0)
     scale = float(sigma_t.max()) if sigma_t.max() > 0 else 1.0
-    return {"type": "homogeneous", "sigma_t": _rgb(sigma_t / scale), "scale": scale,
-            "albedo": _rgb(np.clip(albedo, 0.0, 1.0)), "phase": {"type": "hg", "g": float(medium.g)}}
+    return {
+        "type": "homogeneous",
+        "sigma_t": _rgb(sigma_t / scale),
+        "scale": scale,
+        "albedo": _rgb(np.clip(albedo, 0.0, 1.0)),
+        "phase": {"type": "hg", "g": float(medium.g)},
+    }
 
 
 # Mitsuba starts camera rays near_clip / cos(theta) in front of the pinhole (default 1 cm), and
@@ -157,15 +172,30 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
     out: dict[str, Any] = {"type": "scene"}
 
     if transient:
-        out["integrator"] = {"type": "transient_prbvolpath", "camera_unwarp": False,
-                             "max_depth": scene.max_depth, "rr_depth": scene.rr_depth}
-        film_dict = {"type": "transient_hdr_film", "width": cam.width, "height": cam.height,
-                     "temporal_bins": film.temporal_bins, "bin_width_opl": film.bin_width_opl,
-                     "start_opl": film.start_opl + disk_sun_opl_shift(scene, scene_dir), "rfilter": {"type": "box"}}
+        out["integrator"] = {
+            "type": "transient_prbvolpath",
+            "camera_unwarp": False,
+            "max_depth": scene.max_depth,
+            "rr_depth": scene.rr_depth,
+        }
+        film_dict = {
+            "type": "transient_hdr_film",
+            "width": cam.width,
+            "height": cam.height,
+            "temporal_bins": film.temporal_bins,
+            "bin_width_opl": film.bin_width_opl,
+            "start_opl": film.start_opl + disk_sun_opl_shift(scene, scene_dir),
+            "rfilter": {"type": "box"},
+        }
     else:
         out["integrator"] = {"type": "volpath", "max_depth": scene.max_depth, "rr_depth": scene.rr_depth}
-        film_dict = {"type": "hdrfilm", "width": cam.width, "height": cam.height, "rfilter": {"type": "box"},
-                     "pixel_format": "rgb"}
+        film_dict = {
+            "type": "hdrfilm",
+            "width": cam.width,
+            "height": cam.height,
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgb",
+        }
 
     for key, medium in scene.media.items():  # declared first so that shapes and the camera can refer to them
         out[f"medium_{key}"] = _medium_dict(medium)
@@ -180,17 +210,26 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
         if light["type"] == "sun" and light["model"] == "disk":
             reach = np.linalg.norm(np.asarray(cam.origin) - centre) + disk_sun(light, centre, radius)["distance"]
             far = max(far, 2.0 * reach)
-    sensor = {"type": "perspective", "fov": float(cam.fov), "fov_axis": cam.fov_axis, "far_clip": float(far),
-              "near_clip": NEAR_CLIP,
-              "to_world": T().look_at(origin=list(cam.origin), target=list(cam.target), up=list(cam.up)),
-              "film": film_dict, "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)}}
+    sensor = {
+        "type": "perspective",
+        "fov": float(cam.fov),
+        "fov_axis": cam.fov_axis,
+        "far_clip": float(far),
+        "near_clip": NEAR_CLIP,
+        "to_world": T().look_at(origin=list(cam.origin), target=list(cam.target), up=list(cam.up)),
+        "film": film_dict,
+        "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)},
+    }
     if cam.medium:
         sensor["medium"] = ref(cam.medium)
     out["sensor"] = sensor
 
     for i, shape in enumerate(scene.shapes):
-        d: dict[str, Any] = {"type": "ply", "filename": str(Path(scene.mesh_path(shape, scene_dir)).resolve()),
-                             "face_normals": True}
+        d: dict[str, Any] = {
+            "type": "ply",
+            "filename": str(Path(scene.mesh_path(shape, scene_dir)).resolve()),
+            "face_normals": True,
+        }
         if shape.kind == "null":
             d["bsdf"] = {"type": "null"}
         elif shape.kind == "dielectric":
@@ -212,33 +251,48 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
     for i, light in enumerate(scene.lights):
         kind, key = light["type"], f"light_{i}_{light['type']}"
         if kind == "sun" and light["model"] == "directional":
-            out[key] = {"type": "directional", "direction": [float(v) for v in -_unit(light["to_sun"])],
-                        "irradiance": _rgb(light["irradiance"])}
+            out[key] = {
+                "type": "directional",
+                "direction": [float(v) for v in -_unit(light["to_sun"])],
+                "irradiance": _rgb(light["irradiance"]),
+            }
         elif kind == "sun" and light["model"] == "disk":
             disk = disk_sun(light, centre, radius)
-            frame = T().look_at(origin=list(disk["center"]), target=list(disk["center"] + disk["normal"]),
-                                up=_any_up(disk["normal"]))  # the disk's local +z (its emitting side) faces the scene
-            out[key] = {"type": "disk", "to_world": frame @ T().scale([disk["radius"], disk["radius"], 1.0]),
-                        "bsdf": {"type": "diffuse", "reflectance": _rgb((0, 0, 0))},
-                        "emitter": {"type": "area", "radiance": _rgb(disk["radiance"])}}
+            frame = T().look_at(
+                origin=list(disk["center"]), target=list(disk["center"] + disk["normal"]), up=_any_up(disk["normal"])
+            )  # the disk's local +z (its emitting side) faces the scene
+            out[key] = {
+                "type": "disk",
+                "to_world": frame @ T().scale([disk["radius"], disk["radius"], 1.0]),
+                "bsdf": {"type": "diffuse", "reflectance": _rgb((0, 0, 0))},
+                "emitter": {"type": "area", "radiance": _rgb(disk["radiance"])},
+            }
         elif kind == "sun":
             raise ValueError(f"sun model {light['model']!r} is neither directional nor disk")
         elif kind == "sky":
             out[key] = {"type": "constant", "radiance": _rgb(light["radiance"])}
         elif kind == "point":
-            out[key] = {"type": "point", "position": [float(v) for v in light["position"]],
-                        "intensity": _rgb(light["intensity"])}
+            out[key] = {
+                "type": "point",
+                "position": [float(v) for v in light["position"]],
+                "intensity": _rgb(light["intensity"]),
+            }
         elif kind == "spot":
             p, direction = np.asarray(light["position"], np.float64), _unit(light["direction"])
-            out[key] = {"type": "spot", "intensity": _rgb(light["intensity"]),
-                        "cutoff_angle": float(light["cutoff_angle_deg"]), "beam_width": float(light["beam_width_deg"]),
-                        "to_world": T().look_at(origin=list(p), target=list(p + direction), up=_any_up(direction))}
+            out[key] = {
+                "type": "spot",
+                "intensity": _rgb(light["intensity"]),
+                "cutoff_angle": float(light["cutoff_angle_deg"]),
+                "beam_width": float(light["beam_width_deg"]),
+                "to_world": T().look_at(origin=list(p), target=list(p + direction), up=_any_up(direction)),
+            }
         else:
             raise ValueError(f"unknown light type {kind!r}")
     return out
 
 
 # ---------------------------------------------------------------- limits
+
 
 def _suns(scene: Scene, model: str) -> list[dict[str, Any]]:
     return [light for light in scene.lights if light["type"] == "sun" and light["model"] == model]
@@ -253,8 +307,14 @@ def check_reference_limits(scene: Scene, *, transient: bool, force: bool) -> lis
     warnings: list[str] = []
     sealed = [s for s in scene.shapes if s.kind == "dielectric" and s.interior]
     # A point or spot light inside the very medium a dielectric encloses is reached without crossing it.
-    blocked = sorted({light["type"] if light["type"] != "sun" else "directional sun"
-                      for light in _delta_lights(scene) for s in sealed if light.get("medium") != s.interior})
+    blocked = sorted(
+        {
+            light["type"] if light["type"] != "sun" else "directional sun"
+            for light in _delta_lights(scene)
+            for s in sealed
+            if light.get("medium") != s.interior
+        }
+    )
     if blocked:
         ids = sorted({s.interior for s in sealed})
         message = (
@@ -264,40 +324,64 @@ def check_reference_limits(scene: Scene, *, transient: bool, force: bool) -> lis
             "renders black. Use a finite sun "
             "(scene.sun.kind: disk), an index-matched boundary ("
             + ", ".join(f"scene.media.{k}.boundary: null" for k in ids)
-            + "), or set reference.force: true to render it anyway")
+            + "), or set reference.force: true to render it anyway"
+        )
         if not force:
             raise ReferenceRefused(message)
         warnings.append("forced: " + message)
     if sealed and _suns(scene, "disk"):
-        warnings.append("the disk sun reaches media inside dielectric boundaries only through BSDF sampling "
-                        "(next-event estimation is blocked by the specular interface): expect heavy noise there")
+        warnings.append(
+            "the disk sun reaches media inside dielectric boundaries only through BSDF sampling "
+            "(next-event estimation is blocked by the specular interface): expect heavy noise there"
+        )
     if transient:
         sky = [light for light in scene.lights if light["type"] == "sky" and max(light["radiance"]) > 0]
         if sky:
-            warnings.append("the constant sky is missing from mitransient's transient frames (its paths have no "
-                            "finite OPL); it is in the steady images only, so frames sum to less than the steady image")
+            warnings.append(
+                "the constant sky is missing from mitransient's transient frames (its paths have no "
+                "finite OPL); it is in the steady images only, so frames sum to less than the steady image"
+            )
         if _suns(scene, "directional"):
-            warnings.append("mitransient's directional sun is not a plane wavefront: next-event estimation puts the "
-                            "sun 2 R_s behind every shading point, so direct-sun τ is 2 R_s plus the camera leg "
-                            "everywhere; do not compare sun timing with it (ptpb.md §11)")
+            warnings.append(
+                "mitransient's directional sun is not a plane wavefront: next-event estimation puts the "
+                "sun 2 R_s behind every shading point, so direct-sun τ is 2 R_s plus the camera leg "
+                "everywhere; do not compare sun timing with it (ptpb.md §11)"
+            )
         if _suns(scene, "disk") and _timed_emitters(scene):
-            warnings.append("the disk sun's light reaches the scene disk_distance_radii bounding radii later than "
-                            "the ptpb τ origin, and other timed emitters share the film, so the window is not "
-                            "shifted: the sun's light lies outside the frames")
+            warnings.append(
+                "the disk sun's light reaches the scene disk_distance_radii bounding radii later than "
+                "the ptpb τ origin, and other timed emitters share the film, so the window is not "
+                "shifted: the sun's light lies outside the frames"
+            )
         if scene.camera.medium:
-            warnings.append(f"mitransient ignores camera.medium '{scene.camera.medium}' (camera paths start in "
-                            "vacuum), so its transient reference leaves that medium out along every camera ray "
-                            "until the ray crosses a boundary: do not compare it")
+            warnings.append(
+                f"mitransient ignores camera.medium '{scene.camera.medium}' (camera paths start in "
+                "vacuum), so its transient reference leaves that medium out along every camera ray "
+                "until the ray crosses a boundary: do not compare it"
+            )
         if scene.film.frame_mode == "gate":
-            warnings.append("mitransient frames are bins (integrals over each bin); divide by bin_width_opl to "
-                            "compare with gate frames")
+            warnings.append(
+                "mitransient frames are bins (integrals over each bin); divide by bin_width_opl to "
+                "compare with gate frames"
+            )
     return warnings
 
 
 # ---------------------------------------------------------------- rendering
 
-def _render_passes(scene: Scene, scene_dir: Path, *, transient: bool, spp: int, spp_per_pass: int, seed: int,
-                   time_budget_s: Optional[float], variant: str, quiet: bool) -> tuple[list[np.ndarray], dict]:
+
+def _render_passes(
+    scene: Scene,
+    scene_dir: Path,
+    *,
+    transient: bool,
+    spp: int,
+    spp_per_pass: int,
+    seed: int,
+    time_budget_s: float | None,
+    variant: str,
+    quiet: bool,
+) -> tuple[list[np.ndarray], dict]:
     import mitsuba as mi
     from tqdm import tqdm
 
@@ -319,35 +403,74 @@ def _render_passes(scene: Scene, scene_dir: Path, *, transient: bool, spp: int, 
             n = spp_per_pass if time_budget_s is not None else min(spp_per_pass, spp - done)
             t0 = time.perf_counter()
             result = mi.render(mi_scene, seed=passes, spp=n)
-            images = ([np.array(result[1]), np.array(result[0])] if transient else [np.array(result)])
+            images = [np.array(result[1]), np.array(result[0])] if transient else [np.array(result)]
             images = [im[..., :3].astype(np.float64) * n for im in images]
             sums = images if not sums else [a + b for a, b in zip(sums, images)]
             last = time.perf_counter() - t0
             done += n
             passes += 1
             bar.update(n)
-    timing = {"seconds": time.perf_counter() - start, "spp": done, "passes": passes, "spp_per_pass": spp_per_pass,
-              "seed": seed, "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
-              "variant": variant, "integrator": "transient_prbvolpath" if transient else "volpath"}
+    timing = {
+        "seconds": time.perf_counter() - start,
+        "spp": done,
+        "passes": passes,
+        "spp_per_pass": spp_per_pass,
+        "seed": seed,
+        "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "variant": variant,
+        "integrator": "transient_prbvolpath" if transient else "volpath",
+    }
     return [s / done for s in sums], timing
 
 
-def render_steady(scene: Scene, scene_dir: Path, *, spp: int, spp_per_pass: int = 16, seed: int = 0,
-                  time_budget_s: Optional[float] = None, variant: str = "llvm_ad_rgb",
-                  quiet: bool = False) -> tuple[np.ndarray, dict]:
+def render_steady(
+    scene: Scene,
+    scene_dir: Path,
+    *,
+    spp: int,
+    spp_per_pass: int = 16,
+    seed: int = 0,
+    time_budget_s: float | None = None,
+    variant: str = "llvm_ad_rgb",
+    quiet: bool = False,
+) -> tuple[np.ndarray, dict]:
     """Mitsuba volpath image (H, W, 3) float32 and its timing {seconds, spp, passes, peak_memory_mib, variant}."""
-    (image,), timing = _render_passes(scene, scene_dir, transient=False, spp=spp, spp_per_pass=spp_per_pass,
-                                      seed=seed, time_budget_s=time_budget_s, variant=variant, quiet=quiet)
+    (image,), timing = _render_passes(
+        scene,
+        scene_dir,
+        transient=False,
+        spp=spp,
+        spp_per_pass=spp_per_pass,
+        seed=seed,
+        time_budget_s=time_budget_s,
+        variant=variant,
+        quiet=quiet,
+    )
     return np.ascontiguousarray(image, dtype=np.float32), timing
 
 
-def render_transient(scene: Scene, scene_dir: Path, *, spp: int, spp_per_pass: int = 16, seed: int = 0,
-                     time_budget_s: Optional[float] = None, quiet: bool = False
-                     ) -> tuple[np.ndarray, np.ndarray, dict]:
+def render_transient(
+    scene: Scene,
+    scene_dir: Path,
+    *,
+    spp: int,
+    spp_per_pass: int = 16,
+    seed: int = 0,
+    time_budget_s: float | None = None,
+    quiet: bool = False,
+) -> tuple[np.ndarray, np.ndarray, dict]:
     """mitransient frames (T, H, W, 3) float32 in bins of scene.film, its own steady image (H, W, 3), timing."""
-    (frames, steady), timing = _render_passes(scene, scene_dir, transient=True, spp=spp, spp_per_pass=spp_per_pass,
-                                              seed=seed, time_budget_s=time_budget_s, variant="llvm_ad_rgb",
-                                              quiet=quiet)
+    (frames, steady), timing = _render_passes(
+        scene,
+        scene_dir,
+        transient=True,
+        spp=spp,
+        spp_per_pass=spp_per_pass,
+        seed=seed,
+        time_budget_s=time_budget_s,
+        variant="llvm_ad_rgb",
+        quiet=quiet,
+    )
     frames = np.ascontiguousarray(np.moveaxis(frames, 2, 0), dtype=np.float32)  # (H, W, T, C) -> (T, H, W, C)
     timing["start_opl_shift_m"] = disk_sun_opl_shift(scene, scene_dir)
     return frames, np.ascontiguousarray(steady, dtype=np.float32), timing
@@ -355,8 +478,10 @@ def render_transient(scene: Scene, scene_dir: Path, *, spp: int, spp_per_pass: i
 
 # ---------------------------------------------------------------- the stage
 
-def run_reference_stage(scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *, seed: int,
-                        quiet: bool = False) -> dict:
+
+def run_reference_stage(
+    scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *, seed: int, quiet: bool = False
+) -> dict:
     """Render ``scene_dir/scene.json`` as ``cfg`` asks and write the reference outputs into ``out_dir``:
     steady.exr/.npy, frames.npy, frames/frame_NNNN.exr, transient_steady.npy and timing.json."""
     scene_dir, out_dir = Path(scene_dir), Path(out_dir)
@@ -370,34 +495,60 @@ def run_reference_stage(scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *,
     out_dir.mkdir(parents=True, exist_ok=True)
     common = {"spp_per_pass": cfg.spp_per_pass, "time_budget_s": cfg.time_budget_s, "quiet": quiet}
     timing: dict[str, Any] = {
-        "steady": None, "transient": None, "warnings": warnings, "camera_leg_included": True,
+        "steady": None,
+        "transient": None,
+        "warnings": warnings,
+        "camera_leg_included": True,
         "frame_units": FRAME_UNITS,
-        "film": {"mode": scene.film.mode, "temporal_bins": scene.film.temporal_bins,
-                 "start_opl": scene.film.start_opl, "bin_width_opl": scene.film.bin_width_opl,
-                 "end_opl": scene.film.start_opl + scene.film.temporal_bins * scene.film.bin_width_opl,
-                 "width": scene.camera.width, "height": scene.camera.height, "frame_mode": "bins"},
+        "film": {
+            "mode": scene.film.mode,
+            "temporal_bins": scene.film.temporal_bins,
+            "start_opl": scene.film.start_opl,
+            "bin_width_opl": scene.film.bin_width_opl,
+            "end_opl": scene.film.start_opl + scene.film.temporal_bins * scene.film.bin_width_opl,
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "frame_mode": "bins",
+        },
     }
     if cfg.steady:
         image, timing["steady"] = render_steady(scene, scene_dir, spp=cfg.spp, seed=seed, variant=cfg.variant, **common)
         write_exr(out_dir / "steady.exr", image)
         steady_timing = timing["steady"]
-        rendered_image(image, out_dir / "steady.png",
-                       f"Mitsuba 3 volpath, {steady_timing['spp']} spp, {steady_timing['seconds']:.0f} s")
+        rendered_image(
+            image,
+            out_dir / "steady.png",
+            f"Mitsuba 3 volpath, {steady_timing['spp']} spp, {steady_timing['seconds']:.0f} s",
+        )
         save_npy_atomic(out_dir / "steady.npy", image)
     if transient:
         frames, steady, timing["transient"] = render_transient(
-            scene, scene_dir, spp=cfg.transient_spp or cfg.spp, seed=seed + TRANSIENT_SEED_OFFSET, **common)
+            scene, scene_dir, spp=cfg.transient_spp or cfg.spp, seed=seed + TRANSIENT_SEED_OFFSET, **common
+        )
         save_npy_atomic(out_dir / "frames.npy", frames)
         save_npy_atomic(out_dir / "transient_steady.npy", steady)
         for k, frame in enumerate(frames):
             write_exr(out_dir / "frames" / f"frame_{k:04d}.exr", frame)
         timing["film"]["start_opl_shift_m"] = timing["transient"]["start_opl_shift_m"]
     write_json_atomic(out_dir / "timing.json", timing)
-    return {"steady": timing["steady"] is not None, "transient": timing["transient"] is not None,
-            "frames": scene.film.temporal_bins if transient else 0,
-            "seconds": sum(t["seconds"] for t in (timing["steady"], timing["transient"]) if t),
-            "warnings": warnings}
+    return {
+        "steady": timing["steady"] is not None,
+        "transient": timing["transient"] is not None,
+        "frames": scene.film.temporal_bins if transient else 0,
+        "seconds": sum(t["seconds"] for t in (timing["steady"], timing["transient"]) if t),
+        "warnings": warnings,
+    }
 
 
-__all__ = ["ReferenceRefused", "use_variant", "scene_to_mitsuba", "check_reference_limits", "disk_sun",
-           "disk_sun_opl_shift", "render_steady", "render_transient", "run_reference_stage", "FRAME_UNITS"]
+__all__ = [
+    "ReferenceRefused",
+    "use_variant",
+    "scene_to_mitsuba",
+    "check_reference_limits",
+    "disk_sun",
+    "disk_sun_opl_shift",
+    "render_steady",
+    "render_transient",
+    "run_reference_stage",
+    "FRAME_UNITS",
+]

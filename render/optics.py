@@ -11,12 +11,14 @@ every coefficient is per metre unless a preset says otherwise (the thesis sets, 
     reduce(optics, form)                   full | diffraction_removed | isotropic_reduced (section 4)
     derived_quantities(optics)             k_e, z_e, r_d, transport mean free path (section 5)
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Literal, Mapping
+from typing import Literal
 
 import numpy as np
 import yaml
@@ -57,14 +59,14 @@ class MediumOptics:
     matched: the region index is then that of the surroundings, see ``region_ior``).
     """
 
-    sigma_s: Triple          # scattering coefficient [m-1 or per scene unit]
-    sigma_a: Triple          # absorption coefficient [m-1]
-    g: Triple                # Henyey-Greenstein mean cosine [-]
-    ior: Triple              # material refractive index [-]
-    boundary: Boundary       # null (index matched) or dielectric
-    form: Form = "full"      # which phase-function parameterisation (section 4)
+    sigma_s: Triple  # scattering coefficient [m-1 or per scene unit]
+    sigma_a: Triple  # absorption coefficient [m-1]
+    g: Triple  # Henyey-Greenstein mean cosine [-]
+    ior: Triple  # material refractive index [-]
+    boundary: Boundary  # null (index matched) or dielectric
+    form: Form = "full"  # which phase-function parameterisation (section 4)
     name: str = ""
-    source: str = ""         # one line: where the numbers come from
+    source: str = ""  # one line: where the numbers come from
     inputs: Mapping[str, float | str] = field(default_factory=dict)  # physical inputs, for reports
 
     def __post_init__(self) -> None:
@@ -108,6 +110,7 @@ class MediumOptics:
 
 # ---------------------------------------------------------------- physical derivations (sections 3, 6, 7)
 
+
 def optical_radius_from_ssa(ssa: float) -> float:
     """r_opt = 3 / (rho_ice SSA) [m] from SSA [m2 kg-1]."""
     if ssa <= 0:
@@ -121,8 +124,13 @@ def ssa_from_optical_radius(optical_radius: float) -> float:
     return 3.0 / (RHO_ICE * optical_radius)
 
 
-def impurity_absorption(density: float, black_carbon_ng_per_g: float = 0.0, dust_ug_per_g: float = 0.0,
-                        dust_mac_400: float = 83.0, dust_aae: float = 2.9) -> np.ndarray:
+def impurity_absorption(
+    density: float,
+    black_carbon_ng_per_g: float = 0.0,
+    dust_ug_per_g: float = 0.0,
+    dust_mac_400: float = 83.0,
+    dust_aae: float = 2.9,
+) -> np.ndarray:
     """sigma_a added by impurities, rho c MAC(lambda) [m-1] (section 7).
 
     Black carbon in ng/g, dust in ug/g; dust MAC(lambda) = MAC_400 (lambda / 400 nm)^-AAE with MAC_400 in m2/kg
@@ -142,10 +150,19 @@ def tartes_g(n: np.ndarray, c: np.ndarray, g0_natural: float = 0.86) -> np.ndarr
     return g_inf - (g_inf - g0) * np.exp(-y * c)
 
 
-def derive_snow(density: float, *, ssa: float | None = None, optical_radius: float | None = None,
-                absorption_enhancement: float = 1.6, g0_natural: float = 0.86,
-                black_carbon_ng_per_g: float = 0.0, dust_ug_per_g: float = 0.0,
-                alpha_ice=ALPHA_ICE, n_ice=N_ICE, name: str = "snow") -> MediumOptics:
+def derive_snow(
+    density: float,
+    *,
+    ssa: float | None = None,
+    optical_radius: float | None = None,
+    absorption_enhancement: float = 1.6,
+    g0_natural: float = 0.86,
+    black_carbon_ng_per_g: float = 0.0,
+    dust_ug_per_g: float = 0.0,
+    alpha_ice=ALPHA_ICE,
+    n_ice=N_ICE,
+    name: str = "snow",
+) -> MediumOptics:
     """Snow or firn from density [kg m-3] and SSA [m2 kg-1] or optical radius [m] (section 3).
 
     sigma_t = 3 rho / (2 rho_ice r_opt); 1 - omega from the Kokhanovsky-Zege form (TARTES), which reduces to
@@ -168,17 +185,39 @@ def derive_snow(density: float, *, ssa: float | None = None, optical_radius: flo
     sigma_s = sigma_t - sigma_a_ice
     sigma_a = sigma_a_ice + impurity_absorption(density, black_carbon_ng_per_g, dust_ug_per_g)
     g = tartes_g(n, c, g0_natural)
-    inputs = {"density_kg_m3": density, "ssa_m2_kg": ssa_from_optical_radius(r_opt), "optical_radius_m": r_opt,
-              "absorption_enhancement": absorption_enhancement, "g0_natural": g0_natural,
-              "black_carbon_ng_g": black_carbon_ng_per_g, "dust_ug_g": dust_ug_per_g}
-    return MediumOptics(_triple(sigma_s, "sigma_s"), _triple(sigma_a, "sigma_a"), _triple(g, "g"),
-                        _triple(n, "ior"), "null", "full", name,
-                        "snow_optics.md §3: grains of ice in air (Kokhanovsky & Zege 2004, TARTES)", inputs)
+    inputs = {
+        "density_kg_m3": density,
+        "ssa_m2_kg": ssa_from_optical_radius(r_opt),
+        "optical_radius_m": r_opt,
+        "absorption_enhancement": absorption_enhancement,
+        "g0_natural": g0_natural,
+        "black_carbon_ng_g": black_carbon_ng_per_g,
+        "dust_ug_g": dust_ug_per_g,
+    }
+    return MediumOptics(
+        _triple(sigma_s, "sigma_s"),
+        _triple(sigma_a, "sigma_a"),
+        _triple(g, "g"),
+        _triple(n, "ior"),
+        "null",
+        "full",
+        name,
+        "snow_optics.md §3: grains of ice in air (Kokhanovsky & Zege 2004, TARTES)",
+        inputs,
+    )
 
 
-def derive_bubbly_ice(density: float, bubble_radius: float, *, g: float = 0.86, alpha_ice=ALPHA_ICE,
-                      n_ice=N_ICE, black_carbon_ng_per_g: float = 0.0, dust_ug_per_g: float = 0.0,
-                      name: str = "bubbly_ice") -> MediumOptics:
+def derive_bubbly_ice(
+    density: float,
+    bubble_radius: float,
+    *,
+    g: float = 0.86,
+    alpha_ice=ALPHA_ICE,
+    n_ice=N_ICE,
+    black_carbon_ng_per_g: float = 0.0,
+    dust_ug_per_g: float = 0.0,
+    name: str = "bubbly_ice",
+) -> MediumOptics:
     """Glacier ice with air bubbles: v = 1 - rho/rho_ice, sigma_s = 3 v / (2 r_b), sigma_a = (1 - v) alpha (section 6)."""
     if not 0 < density <= RHO_ICE:
         raise ValueError(f"ice density must lie in (0, {RHO_ICE}] kg/m3, got {density}")
@@ -187,19 +226,41 @@ def derive_bubbly_ice(density: float, bubble_radius: float, *, g: float = 0.86, 
     v = 1.0 - density / RHO_ICE
     sigma_s = 3.0 * v / (2.0 * bubble_radius) * np.ones(3)
     sigma_a = (1.0 - v) * np.asarray(alpha_ice) + impurity_absorption(density, black_carbon_ng_per_g, dust_ug_per_g)
-    inputs = {"density_kg_m3": density, "air_fraction": v, "bubble_radius_m": bubble_radius,
-              "black_carbon_ng_g": black_carbon_ng_per_g, "dust_ug_g": dust_ug_per_g}
-    return MediumOptics(_triple(sigma_s, "sigma_s"), _triple(sigma_a, "sigma_a"), _triple(g, "g"),
-                        _triple(n_ice, "ior"), "dielectric", "full", name,
-                        "snow_optics.md §6: air bubbles in ice", inputs)
+    inputs = {
+        "density_kg_m3": density,
+        "air_fraction": v,
+        "bubble_radius_m": bubble_radius,
+        "black_carbon_ng_g": black_carbon_ng_per_g,
+        "dust_ug_g": dust_ug_per_g,
+    }
+    return MediumOptics(
+        _triple(sigma_s, "sigma_s"),
+        _triple(sigma_a, "sigma_a"),
+        _triple(g, "g"),
+        _triple(n_ice, "ior"),
+        "dielectric",
+        "full",
+        name,
+        "snow_optics.md §6: air bubbles in ice",
+        inputs,
+    )
 
 
-def derive_clear_ice(*, haze_sigma_s: float = 0.0, g: float = 0.86, alpha_ice=ALPHA_ICE, n_ice=N_ICE,
-                     name: str = "clear_ice") -> MediumOptics:
+def derive_clear_ice(
+    *, haze_sigma_s: float = 0.0, g: float = 0.86, alpha_ice=ALPHA_ICE, n_ice=N_ICE, name: str = "clear_ice"
+) -> MediumOptics:
     """Pure ice: sigma_a = alpha_ice, optional faint grey haze, smooth dielectric (section 6)."""
-    return MediumOptics(_triple(haze_sigma_s, "sigma_s"), _triple(alpha_ice, "sigma_a"), _triple(g, "g"),
-                        _triple(n_ice, "ior"), "dielectric", "full", name,
-                        "snow_optics.md §6: clear ice", {"haze_sigma_s_m": haze_sigma_s})
+    return MediumOptics(
+        _triple(haze_sigma_s, "sigma_s"),
+        _triple(alpha_ice, "sigma_a"),
+        _triple(g, "g"),
+        _triple(n_ice, "ior"),
+        "dielectric",
+        "full",
+        name,
+        "snow_optics.md §6: clear ice",
+        {"haze_sigma_s_m": haze_sigma_s},
+    )
 
 
 def thesis_set(k: int, *, metres_per_unit: float | None = None) -> MediumOptics:
@@ -216,20 +277,27 @@ def thesis_set(k: int, *, metres_per_unit: float | None = None) -> MediumOptics:
     return optics_from_mapping(spec, f"thesis_set_{k}")
 
 
-def _thesis_from_values(name: str, sigma_s, sigma_a, g: float, ior: float, metres_per_unit: float = 1.0) -> MediumOptics:
+def _thesis_from_values(
+    name: str, sigma_s, sigma_a, g: float, ior: float, metres_per_unit: float = 1.0
+) -> MediumOptics:
     if metres_per_unit <= 0:
         raise ValueError(f"{name}: metres_per_unit must be positive, got {metres_per_unit}")
     scale = 1.0 / metres_per_unit
     return MediumOptics(
         _triple(np.asarray(sigma_s, dtype=np.float64) * scale, "sigma_s"),
         _triple(np.asarray(sigma_a, dtype=np.float64) * scale, "sigma_a"),
-        _triple(g, "g"), _triple(ior, "ior"), "dielectric", "full", name,
+        _triple(g, "g"),
+        _triple(ior, "ior"),
+        "dielectric",
+        "full",
+        name,
         f"Chukir 2021 (snow_optics.md §9), literal, per thesis unit / {metres_per_unit} m",
         {"metres_per_unit": metres_per_unit},
     )
 
 
 # ---------------------------------------------------------------- render-time reductions (section 4)
+
 
 def reduce(optics: MediumOptics, form: Form) -> MediumOptics:
     """Return the medium in another phase-function form; sigma_a and sigma_s (1 - g) are unchanged.
@@ -254,23 +322,26 @@ def reduce(optics: MediumOptics, form: Form) -> MediumOptics:
 
 # ---------------------------------------------------------------- derived quantities (section 5)
 
+
 @dataclass(frozen=True)
 class DerivedOptics:
     """Asymptotic quantities of the bare semi-infinite, index-matched medium, per channel."""
 
-    sigma_t: Triple                  # [m-1]
+    sigma_t: Triple  # [m-1]
     single_scattering_albedo: Triple  # [-]
-    reduced_scattering: Triple       # sigma_s (1 - g) [m-1]
-    flux_extinction: Triple          # k_e [m-1]
-    efolding_depth: Triple           # z_e = 1 / k_e, or 1 / sigma_t without scattering [m]
-    diffuse_albedo: Triple           # r_d (white-sky) from the asymptotic formula, NaN without scattering [-]
+    reduced_scattering: Triple  # sigma_s (1 - g) [m-1]
+    flux_extinction: Triple  # k_e [m-1]
+    efolding_depth: Triple  # z_e = 1 / k_e, or 1 / sigma_t without scattering [m]
+    diffuse_albedo: Triple  # r_d (white-sky) from the asymptotic formula, NaN without scattering [-]
     transport_mean_free_path: Triple  # 1 / (sigma_s (1 - g)) [m], inf without scattering
     diffusive: tuple[bool, bool, bool]  # sigma_a < 0.1 sigma_s': there r_d and k_e are accurate to < 0.01
-    slab_transmittance_1m: Triple    # unscattered T of a 1 m slab at normal incidence, incl. Fresnel if dielectric
+    slab_transmittance_1m: Triple  # unscattered T of a 1 m slab at normal incidence, incl. Fresnel if dielectric
 
     def to_dict(self) -> dict:
-        return {k: [None if isinstance(x, float) and not math.isfinite(x) else x for x in v]
-                for k, v in asdict(self).items()}
+        return {
+            k: [None if isinstance(x, float) and not math.isfinite(x) else x for x in v]
+            for k, v in asdict(self).items()
+        }
 
 
 def derived_quantities(optics: MediumOptics) -> DerivedOptics:
@@ -291,16 +362,25 @@ def derived_quantities(optics: MediumOptics) -> DerivedOptics:
     n = np.asarray(optics.ior)
     fresnel_r0 = ((n - 1) / (n + 1)) ** 2 if optics.boundary == "dielectric" else np.zeros(3)
     slab_t = (1 - fresnel_r0) ** 2 * np.exp(-t * 1.0)
+
     def floats(x) -> Triple:
         return tuple(float(v) for v in x)  # type: ignore[return-value]
 
     return DerivedOptics(
-        floats(t), floats(omega), floats(s_red), floats(k_e), floats(z_e), floats(r_d), floats(ell),
-        tuple(bool(x) for x in diffusive), floats(slab_t),  # type: ignore[arg-type]
+        floats(t),
+        floats(omega),
+        floats(s_red),
+        floats(k_e),
+        floats(z_e),
+        floats(r_d),
+        floats(ell),
+        tuple(bool(x) for x in diffusive),
+        floats(slab_t),  # type: ignore[arg-type]
     )
 
 
 # ---------------------------------------------------------------- presets on disk
+
 
 def preset_path(name: str) -> Path:
     return OPTICS_PRESETS_DIR / f"{name}.yaml"
@@ -326,12 +406,21 @@ def optics_from_mapping(spec: Mapping, name: str) -> MediumOptics:
             return _thesis_from_values(name, **spec)
         if kind == "coefficients":
             ior = spec.get("ior", 1.0)
-            return MediumOptics(_triple(spec["sigma_s"], "sigma_s"), _triple(spec["sigma_a"], "sigma_a"),
-                                _triple(spec.get("g", 0.0), "g"), _triple(ior, "ior"),
-                                spec.get("boundary", "null"), "full", name, spec.get("source", "explicit coefficients"))
+            return MediumOptics(
+                _triple(spec["sigma_s"], "sigma_s"),
+                _triple(spec["sigma_a"], "sigma_a"),
+                _triple(spec.get("g", 0.0), "g"),
+                _triple(ior, "ior"),
+                spec.get("boundary", "null"),
+                "full",
+                name,
+                spec.get("source", "explicit coefficients"),
+            )
     except TypeError as exc:
         raise ValueError(f"optical preset '{name}': {exc}") from None
-    raise ValueError(f"optical preset '{name}': kind must be snow, bubbly_ice, clear_ice, thesis or coefficients, got {kind!r}")
+    raise ValueError(
+        f"optical preset '{name}': kind must be snow, bubbly_ice, clear_ice, thesis or coefficients, got {kind!r}"
+    )
 
 
 def _read_preset(name: str) -> dict:
@@ -355,8 +444,25 @@ def preset_description(name: str) -> str:
 
 
 __all__ = [
-    "ALPHA_ICE", "N_ICE", "RHO_ICE", "WAVELENGTHS_NM", "PRESET_NAMES", "THESIS_SET_NAMES", 
-    "MediumOptics", "DerivedOptics", "derive_snow", "derive_bubbly_ice", "derive_clear_ice",
-    "thesis_set", "reduce", "derived_quantities", "impurity_absorption", "tartes_g", "load_preset",
-    "available_presets", "optics_from_mapping", "optical_radius_from_ssa", "ssa_from_optical_radius",
+    "ALPHA_ICE",
+    "N_ICE",
+    "RHO_ICE",
+    "WAVELENGTHS_NM",
+    "PRESET_NAMES",
+    "THESIS_SET_NAMES",
+    "MediumOptics",
+    "DerivedOptics",
+    "derive_snow",
+    "derive_bubbly_ice",
+    "derive_clear_ice",
+    "thesis_set",
+    "reduce",
+    "derived_quantities",
+    "impurity_absorption",
+    "tartes_g",
+    "load_preset",
+    "available_presets",
+    "optics_from_mapping",
+    "optical_radius_from_ssa",
+    "ssa_from_optical_radius",
 ]

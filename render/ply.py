@@ -4,6 +4,7 @@ The geometry stage writes the same layout, so either side reads the other's file
 accepts extra vertex properties (normals, colours) and other scalar types, as long as the file is
 binary little-endian and every face is a triangle.
 """
+
 from __future__ import annotations
 
 import os
@@ -14,9 +15,22 @@ import numpy as np
 from pipeline.atomic import atomic_path
 
 _PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "<i2", "int16": "<i2",
-    "ushort": "<u2", "uint16": "<u2", "int": "<i4", "int32": "<i4", "uint": "<u4", "uint32": "<u4",
-    "float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "<i2",
+    "int16": "<i2",
+    "ushort": "<u2",
+    "uint16": "<u2",
+    "int": "<i4",
+    "int32": "<i4",
+    "uint": "<u4",
+    "uint32": "<u4",
+    "float": "<f4",
+    "float32": "<f4",
+    "double": "<f8",
+    "float64": "<f8",
 }
 
 
@@ -33,8 +47,15 @@ def write_ply(path: str | os.PathLike[str], vertices: np.ndarray, faces: np.ndar
     records["index"] = f
     header = ["ply", "format binary_little_endian 1.0"]
     header += [f"comment {line}" for line in comment.splitlines() if line]
-    header += [f"element vertex {len(v)}", "property float x", "property float y", "property float z",
-               f"element face {len(f)}", "property list uchar int vertex_indices", "end_header"]
+    header += [
+        f"element vertex {len(v)}",
+        "property float x",
+        "property float y",
+        "property float z",
+        f"element face {len(f)}",
+        "property list uchar int vertex_indices",
+        "end_header",
+    ]
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as out:
             out.write(("\n".join(header) + "\n").encode("ascii"))

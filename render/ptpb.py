@@ -17,10 +17,12 @@
 Free flights sample the channel-average mixture of the three exponentials and carry all three
 channels (no hero wavelength), as in ptpb.md §3.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional
+from typing import Any
 
 import numpy as np
 
@@ -57,8 +59,15 @@ def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:
 def _tan_half_fov_x(cam: dict) -> float:
     from render.scene import Camera, tan_half_fov
 
-    fov_only = Camera((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0), cam["fov"], cam["width"], cam["height"],
-                      cam.get("fov_axis", "x"))
+    fov_only = Camera(
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 1.0),
+        (0.0, 1.0, 0.0),
+        cam["fov"],
+        cam["width"],
+        cam["height"],
+        cam.get("fov_axis", "x"),
+    )
     return tan_half_fov(fov_only)[0]
 
 
@@ -160,9 +169,9 @@ def render(
     scene: dict,
     settings: PTPBConfig | dict,
     *,
-    progress: bool | Callable[[dict], Optional[bool]] = False,
-    resume: Optional[dict] = None,
-    checkpoint: Optional[Callable[[dict], Optional[bool]]] = None,
+    progress: bool | Callable[[dict], bool | None] = False,
+    resume: dict | None = None,
+    checkpoint: Callable[[dict], bool | None] | None = None,
     **overrides: Any,
 ) -> RenderResult:
     """Render ``scene`` (the core dict above) with ``settings`` (a PTPBConfig, or a core settings
@@ -190,8 +199,13 @@ def render(
 
         def callback(info: dict) -> bool:
             bar.n = info["iteration"]
-            bar.set_postfix(R=f"{info['radius']:.3g}", beams=info["beams"], r_s=f"{info['surface_radius']:.3g}",
-                            photons=info["surface_photons"], refresh=False)
+            bar.set_postfix(
+                R=f"{info['radius']:.3g}",
+                beams=info["beams"],
+                r_s=f"{info['surface_radius']:.3g}",
+                photons=info["surface_photons"],
+                refresh=False,
+            )
             bar.refresh()
             return True
 
@@ -202,14 +216,29 @@ def render(
             bar.close()
     stats = dict(out["stats"])
     stats["initial_beam_radius_m"] = core_settings["initial_beam_radius"]
-    stats["initial_time_half_width_m"] = core_settings.get("initial_time_half_width", core_settings["initial_beam_radius"])
+    stats["initial_time_half_width_m"] = core_settings.get(
+        "initial_time_half_width", core_settings["initial_beam_radius"]
+    )
     stats["alpha"] = core_settings.get("alpha", 0.8)
     # The core falls back to the beams' R_0 and T_0, and to the per-mode alpha*, without these keys.
-    stats["initial_surface_radius_m"] = core_settings.get("initial_surface_radius", core_settings["initial_beam_radius"])
+    stats["initial_surface_radius_m"] = core_settings.get(
+        "initial_surface_radius", core_settings["initial_beam_radius"]
+    )
     stats["initial_surface_time_half_width_m"] = core_settings.get(
-        "initial_surface_time_half_width", stats["initial_time_half_width_m"])
+        "initial_surface_time_half_width", stats["initial_time_half_width_m"]
+    )
     surface_alpha = core_settings.get("surface_alpha")
-    stats["surface_alpha"] = surface_alpha if surface_alpha is not None else (
-        4.0 / 7.0 if scene["film"]["frame_mode"] == "gate" else 2.0 / 3.0)
-    return RenderResult(out["steady"], out["frames"], out["early"], out["late"], stats, list(out["snapshots"]),
-                        list(out["snapshot_seconds"]))
+    stats["surface_alpha"] = (
+        surface_alpha
+        if surface_alpha is not None
+        else (4.0 / 7.0 if scene["film"]["frame_mode"] == "gate" else 2.0 / 3.0)
+    )
+    return RenderResult(
+        out["steady"],
+        out["frames"],
+        out["early"],
+        out["late"],
+        stats,
+        list(out["snapshots"]),
+        list(out["snapshot_seconds"]),
+    )

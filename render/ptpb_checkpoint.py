@@ -12,6 +12,7 @@ adds. The settings in RUN_ONLY_SETTINGS only decide how many iterations run, on 
 how often checkpoints are saved or how much memory may be used, so they may change between the
 interrupted run and the one that resumes it (a larger ``iterations`` continues the same render).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -26,8 +27,14 @@ from pipeline.atomic import atomic_path
 
 CHECKPOINT_NAME = "checkpoint.npz"
 FORMAT_VERSION = 2  # 2: float32 frame sums (and frames_carry); 1 held float64 frames
-RUN_ONLY_SETTINGS = ("iterations", "time_budget_s", "threads", "checkpoint_every_iterations", "checkpoint_every_s",
-                     "memory_budget_gib")
+RUN_ONLY_SETTINGS = (
+    "iterations",
+    "time_budget_s",
+    "threads",
+    "checkpoint_every_iterations",
+    "checkpoint_every_s",
+    "memory_budget_gib",
+)
 STATE_ARRAYS = ("steady", "early", "late", "frames")
 OPTIONAL_ARRAYS = ("frames_carry",)  # present past the core's compensated_sums_from (10^4) iterations
 
@@ -36,7 +43,11 @@ def _canonical(value: Any) -> Any:
     """JSON-able form of a scene or settings value; arrays become their dtype, shape and SHA-256."""
     if isinstance(value, np.ndarray):
         data = np.ascontiguousarray(value)
-        return {"dtype": str(data.dtype), "shape": list(data.shape), "sha256": hashlib.sha256(data.tobytes()).hexdigest()}
+        return {
+            "dtype": str(data.dtype),
+            "shape": list(data.shape),
+            "sha256": hashlib.sha256(data.tobytes()).hexdigest(),
+        }
     if isinstance(value, dict):
         return {str(k): _canonical(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -69,15 +80,22 @@ def differences(saved: dict, current: dict) -> list[str]:
 
 def save_checkpoint(path: Path, state: dict, fingerprint: dict) -> Path:
     """Write the core's checkpoint ``state`` and its fingerprint atomically to ``path``."""
-    meta = {"format": FORMAT_VERSION, "fingerprint": fingerprint, "stats": state["stats"],
-            **{k: state[k] for k in ("width", "height", "frame_count", "seed")}}
+    meta = {
+        "format": FORMAT_VERSION,
+        "fingerprint": fingerprint,
+        "stats": state["stats"],
+        **{k: state[k] for k in ("width", "height", "frame_count", "seed")},
+    }
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
-            np.savez(handle, meta=np.array(json.dumps(meta, sort_keys=True)),
-                     snapshot_iterations=np.asarray(state["snapshot_iterations"], dtype=np.int64),
-                     snapshot_seconds=np.asarray(state["snapshot_seconds"], dtype=np.float64),
-                     snapshots=state["snapshots"], **{k: state[k] for k in (*STATE_ARRAYS, *OPTIONAL_ARRAYS)
-                                                      if k in state})
+            np.savez(
+                handle,
+                meta=np.array(json.dumps(meta, sort_keys=True)),
+                snapshot_iterations=np.asarray(state["snapshot_iterations"], dtype=np.int64),
+                snapshot_seconds=np.asarray(state["snapshot_seconds"], dtype=np.float64),
+                snapshots=state["snapshots"],
+                **{k: state[k] for k in (*STATE_ARRAYS, *OPTIONAL_ARRAYS) if k in state},
+            )
     return Path(path)
 
 
@@ -95,8 +113,10 @@ def load_checkpoint(path: Path, fingerprint: dict) -> dict:
         raise ValueError(f"{path}: checkpoint format {meta.get('format')!r}, this version reads {FORMAT_VERSION}")
     changed = differences(meta.get("fingerprint", {}), fingerprint)
     if changed:
-        raise ValueError(f"{path} was saved by a render with another scene or other settings ({'; '.join(changed)}), "
-                         "so it cannot continue this one")
+        raise ValueError(
+            f"{path} was saved by a render with another scene or other settings ({'; '.join(changed)}), "
+            "so it cannot continue this one"
+        )
     return {
         **{k: meta[k] for k in ("width", "height", "frame_count", "seed", "stats")},
         **{k: arrays[k] for k in (*STATE_ARRAYS, *OPTIONAL_ARRAYS, "snapshots") if k in arrays},
@@ -105,4 +125,11 @@ def load_checkpoint(path: Path, fingerprint: dict) -> dict:
     }
 
 
-__all__ = ["CHECKPOINT_NAME", "RUN_ONLY_SETTINGS", "render_fingerprint", "differences", "save_checkpoint", "load_checkpoint"]
+__all__ = [
+    "CHECKPOINT_NAME",
+    "RUN_ONLY_SETTINGS",
+    "render_fingerprint",
+    "differences",
+    "save_checkpoint",
+    "load_checkpoint",
+]

@@ -11,6 +11,7 @@ found there is continued: the stage runner leaves one only under ``pipeline run 
 checkpoint of another scene or other settings is refused. An interrupted render (Ctrl-C) saves
 its completed iterations and raises KeyboardInterrupt, so a partial render is never published.
 """
+
 from __future__ import annotations
 
 import json
@@ -57,8 +58,16 @@ def load_core_scene(scene_dir: Path) -> dict:
     return scene
 
 
-def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: int, threads: int,
-                     quiet: bool = False, checkpoint_dir: Path | None = None) -> dict:
+def run_render_stage(
+    scene_dir: Path,
+    cfg: PTPBConfig,
+    out_dir: Path,
+    *,
+    seed: int,
+    threads: int,
+    quiet: bool = False,
+    checkpoint_dir: Path | None = None,
+) -> dict:
     """Render the scene in ``scene_dir`` with ``cfg`` (seed and threads override the config's).
 
     ``checkpoint_dir`` defaults to the stage runner's ``.render.checkpoint`` next to ``out_dir``."""
@@ -72,7 +81,9 @@ def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: i
         try:
             resume = load_checkpoint(path, fingerprint)
         except ValueError as exc:
-            raise ValueError(f"render: {exc}; run without --resume to start over (that removes the checkpoint)") from None
+            raise ValueError(
+                f"render: {exc}; run without --resume to start over (that removes the checkpoint)"
+            ) from None
         log.info("render: resuming from %s after %d iterations", path, resume["stats"]["iterations"])
 
     def save(state: dict) -> None:
@@ -83,21 +94,34 @@ def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: i
     if result.stats["interrupted"]:
         done = result.stats["iterations"]
         if cfg.checkpoint_every_iterations or cfg.checkpoint_every_s:
-            log.warning("render interrupted after %d iterations, which %s keeps; continue with `pipeline run --resume`",
-                        done, path)
+            log.warning(
+                "render interrupted after %d iterations, which %s keeps; continue with `pipeline run --resume`",
+                done,
+                path,
+            )
         else:
-            log.warning("render interrupted after %d iterations; set render.checkpoint_every_iterations to be able to "
-                        "resume interrupted renders", done)
+            log.warning(
+                "render interrupted after %d iterations; set render.checkpoint_every_iterations to be able to "
+                "resume interrupted renders",
+                done,
+            )
         raise KeyboardInterrupt
     out_dir.mkdir(parents=True, exist_ok=True)
     write_exr(out_dir / "steady.exr", result.steady)
-    rendered_image(result.steady, out_dir / "steady.png", f"ours (PTPB), {result.stats['iterations']} iterations, "
-                   f"{result.stats['time_total_s']:.0f} s")
+    rendered_image(
+        result.steady,
+        out_dir / "steady.png",
+        f"ours (PTPB), {result.stats['iterations']} iterations, {result.stats['time_total_s']:.0f} s",
+    )
     if result.snapshots:
         with atomic_path(out_dir / "snapshots.npz") as tmp:
             with open(tmp, "wb") as handle:
-                np.savez(handle, iterations=np.array([it for it, _ in result.snapshots]),
-                         seconds=np.array(result.snapshot_seconds), steady=np.stack([im for _, im in result.snapshots]))
+                np.savez(
+                    handle,
+                    iterations=np.array([it for it, _ in result.snapshots]),
+                    seconds=np.array(result.snapshot_seconds),
+                    steady=np.stack([im for _, im in result.snapshots]),
+                )
     save_npy_atomic(out_dir / "steady.npy", result.steady)
     save_npy_atomic(out_dir / "frames.npy", result.frames)
     film = scene["film"]
@@ -109,7 +133,8 @@ def run_render_stage(scene_dir: Path, cfg: PTPBConfig, out_dir: Path, *, seed: i
         "temporal_bins": film.get("temporal_bins", 0),
         "start_opl_m": film.get("start_opl", 0.0),
         "bin_width_opl_m": film.get("bin_width_opl", 0.003),
-        "frame_units": "W m^-2 sr^-1 per bin" if (cfg.frame_mode or film["frame_mode"]) == "bins"
+        "frame_units": "W m^-2 sr^-1 per bin"
+        if (cfg.frame_mode or film["frame_mode"]) == "bins"
         else "W m^-2 sr^-1 per metre of OPL",
         "camera_leg_included": not cfg.camera_unwarp,
         "config": cfg.model_dump(),

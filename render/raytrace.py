@@ -10,6 +10,7 @@ Both queries release the GIL and run on ``threads`` threads (0 = every core). Re
 depend on the thread count. Normals are unit geometric normals from the triangle winding
 (right-hand rule), so they point outwards on outward-wound closed meshes.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -57,7 +58,7 @@ class RayEngine:
             raise ValueError(f"mesh {mesh_id}: faces contain negative vertex indices")
         self._scene.add_mesh(v, np.ascontiguousarray(f, dtype=np.uint32), int(mesh_id))
 
-    def commit(self) -> "RayEngine":
+    def commit(self) -> RayEngine:
         self._scene.commit()
         return self
 

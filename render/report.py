@@ -4,13 +4,14 @@ The page uses relative links to local files only, so it works offline and can be
 run folder. A small inline script counts media that failed to load and writes the count into
 ``<body data-missing=...>``, which the tests read back from headless Chromium.
 """
+
 from __future__ import annotations
 
 import html
 import json
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from pipeline.atomic import write_text_atomic
 
@@ -98,17 +99,24 @@ def _section(title: str, folder: Path, report_dir: Path) -> str:
     media = []
     for p in files:
         if p.suffix in IMAGE_SUFFIXES:
-            media.append(f'<figure><a href="{rel(p)}"><img src="{rel(p)}" alt="{html.escape(p.name)}"></a>'
-                         f"<figcaption>{html.escape(p.name)}</figcaption></figure>")
+            media.append(
+                f'<figure><a href="{rel(p)}"><img src="{rel(p)}" alt="{html.escape(p.name)}"></a>'
+                f"<figcaption>{html.escape(p.name)}</figcaption></figure>"
+            )
         elif p.suffix in VIDEO_SUFFIXES:
-            media.append(f'<figure><video controls loop muted preload="metadata" src="{rel(p)}"></video>'
-                         f'<figcaption><a href="{rel(p)}">{html.escape(p.name)}</a></figcaption></figure>')
+            media.append(
+                f'<figure><video controls loop muted preload="metadata" src="{rel(p)}"></video>'
+                f'<figcaption><a href="{rel(p)}">{html.escape(p.name)}</a></figcaption></figure>'
+            )
     parts.extend(media)
     for p in files:
         if p.suffix == ".md":
             parts.append(f"<h3>{html.escape(p.name)}</h3>" + markdown_table_to_html(p.read_text(encoding="utf-8")))
-    links = "".join(f'<li><a href="{rel(p)}">{html.escape(p.relative_to(folder).as_posix())}</a> '
-                    f"({p.stat().st_size / 1024:.0f} KiB)</li>" for p in files)
+    links = "".join(
+        f'<li><a href="{rel(p)}">{html.escape(p.relative_to(folder).as_posix())}</a> '
+        f"({p.stat().st_size / 1024:.0f} KiB)</li>"
+        for p in files
+    )
     parts.append(f"<details><summary>all files</summary><ul class='files'>{links}</ul></details>")
     return "\n".join(parts)
 

@@ -24,6 +24,7 @@ renderer. Schema (``version`` 1)::
                {type: spot, position, direction, intensity[3], cutoff_angle_deg, beam_width_deg, medium}]
     bounding_sphere: {center, radius} of the axis-aligned box of all shape vertices (Mitsuba's rule).
 """
+
 from __future__ import annotations
 
 import json
@@ -31,7 +32,7 @@ import math
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Optional
+from typing import Any, Literal
 
 import numpy as np
 
@@ -52,28 +53,28 @@ class Camera:
     origin: Vec3
     target: Vec3
     up: Vec3
-    fov: float                    # degrees along fov_axis
+    fov: float  # degrees along fov_axis
     width: int
     height: int
     fov_axis: str = "x"
-    medium: Optional[str] = None
+    medium: str | None = None
 
 
 @dataclass
 class Film:
     mode: Literal["steady", "transient"] = "steady"
     temporal_bins: int = 1
-    start_opl: float = 0.0        # m
+    start_opl: float = 0.0  # m
     bin_width_opl: float = 0.003  # m
     frame_mode: Literal["bins", "gate"] = "bins"
 
 
 @dataclass
 class Medium:
-    sigma_s: Vec3                 # m-1
-    sigma_a: Vec3                 # m-1
-    g: float                      # HG mean cosine a renderer uses
-    ior: float                    # region index (refraction and OPL); 1 inside null boundaries
+    sigma_s: Vec3  # m-1
+    sigma_a: Vec3  # m-1
+    g: float  # HG mean cosine a renderer uses
+    ior: float  # region index (refraction and OPL); 1 inside null boundaries
     boundary: Literal["null", "dielectric"]
     g_rgb: Vec3 = (0.0, 0.0, 0.0)
     material_ior_rgb: Vec3 = (1.0, 1.0, 1.0)
@@ -89,11 +90,11 @@ class Medium:
 @dataclass
 class Shape:
     name: str
-    mesh: str                     # PLY path, relative to the scene folder or absolute
+    mesh: str  # PLY path, relative to the scene folder or absolute
     kind: Literal["null", "dielectric", "diffuse"]
-    interior: Optional[str] = None
-    albedo: Optional[Vec3] = None
-    emission: Optional[Vec3] = None
+    interior: str | None = None
+    albedo: Vec3 | None = None
+    emission: Vec3 | None = None
 
 
 @dataclass
@@ -105,43 +106,66 @@ class Scene:
     lights: list[dict[str, Any]] = field(default_factory=list)
     max_depth: int = -1
     rr_depth: int = 5
-    bounding_sphere: Optional[dict[str, Any]] = None
+    bounding_sphere: dict[str, Any] | None = None
     notes: list[str] = field(default_factory=list)
 
     # ---- serialisation
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "format": SCENE_FORMAT, "version": SCENE_VERSION,
+            "format": SCENE_FORMAT,
+            "version": SCENE_VERSION,
             "units": "metres, z up, x east, y north; sigma in 1/m; radiance W m-2 sr-1; irradiance W m-2; "
-                     "intensity W sr-1; time = optical path length in metres",
-            "camera": asdict(self.camera), "film": asdict(self.film),
+            "intensity W sr-1; time = optical path length in metres",
+            "camera": asdict(self.camera),
+            "film": asdict(self.film),
             "integrator": {"max_depth": self.max_depth, "rr_depth": self.rr_depth},
             "media": {k: asdict(m) for k, m in self.media.items()},
             "shapes": [asdict(s) for s in self.shapes],
-            "lights": self.lights, "bounding_sphere": self.bounding_sphere, "notes": self.notes,
+            "lights": self.lights,
+            "bounding_sphere": self.bounding_sphere,
+            "notes": self.notes,
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "Scene":
+    def from_dict(cls, data: dict[str, Any]) -> Scene:
         if data.get("format") != SCENE_FORMAT or data.get("version") != SCENE_VERSION:
-            raise ValueError(f"not a {SCENE_FORMAT} v{SCENE_VERSION} document "
-                             f"(format={data.get('format')!r}, version={data.get('version')!r})")
+            raise ValueError(
+                f"not a {SCENE_FORMAT} v{SCENE_VERSION} document "
+                f"(format={data.get('format')!r}, version={data.get('version')!r})"
+            )
         camera = Camera(**{**data["camera"], **{k: _vec(data["camera"][k]) for k in ("origin", "target", "up")}})
-        media = {k: Medium(**{**m, **{q: _vec(m[q]) for q in ("sigma_s", "sigma_a", "g_rgb", "material_ior_rgb")}})
-                 for k, m in data["media"].items()}
-        shapes = [Shape(**{**s, "albedo": _vec(s["albedo"]) if s.get("albedo") is not None else None,
-                           "emission": _vec(s["emission"]) if s.get("emission") is not None else None})
-                  for s in data["shapes"]]
-        return cls(camera=camera, film=Film(**data["film"]), media=media, shapes=shapes, lights=list(data["lights"]),
-                   max_depth=int(data["integrator"]["max_depth"]), rr_depth=int(data["integrator"]["rr_depth"]),
-                   bounding_sphere=data.get("bounding_sphere"), notes=list(data.get("notes", [])))
+        media = {
+            k: Medium(**{**m, **{q: _vec(m[q]) for q in ("sigma_s", "sigma_a", "g_rgb", "material_ior_rgb")}})
+            for k, m in data["media"].items()
+        }
+        shapes = [
+            Shape(
+                **{
+                    **s,
+                    "albedo": _vec(s["albedo"]) if s.get("albedo") is not None else None,
+                    "emission": _vec(s["emission"]) if s.get("emission") is not None else None,
+                }
+            )
+            for s in data["shapes"]
+        ]
+        return cls(
+            camera=camera,
+            film=Film(**data["film"]),
+            media=media,
+            shapes=shapes,
+            lights=list(data["lights"]),
+            max_depth=int(data["integrator"]["max_depth"]),
+            rr_depth=int(data["integrator"]["rr_depth"]),
+            bounding_sphere=data.get("bounding_sphere"),
+            notes=list(data.get("notes", [])),
+        )
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         return write_json_atomic(path, self.to_dict())
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> "Scene":
+    def load(cls, path: str | os.PathLike[str]) -> Scene:
         return cls.from_dict(json.loads(Path(path).read_text(encoding="utf-8")))
 
     # ---- queries
@@ -155,6 +179,7 @@ class Scene:
 
 
 # ---------------------------------------------------------------- geometry helpers
+
 
 def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     """Unit vector towards the sun; azimuth clockwise from north (y), so 90 deg is east (x)."""
@@ -241,6 +266,7 @@ def pixel_footprint(camera: Camera, distance: float) -> float:
 
 # ---------------------------------------------------------------- the PTPB core's dict (render/ptpb.py)
 
+
 def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str]]:
     """Translate to the core dict of render/ptpb.py, with meshes named by ``mesh`` (relative to the
     scene folder). Returns the dict and the things it had to leave out (spot lights, the sun's size)."""
@@ -249,37 +275,74 @@ def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str]]:
     omitted: list[str] = []
     shapes = []
     for s in scene.shapes:
-        shapes.append({
-            "mesh": s.mesh, "kind": s.kind, "interior": index[s.interior] if s.interior else -1, "exterior": -1,
-            "albedo": list(s.albedo) if s.albedo is not None else [0.0, 0.0, 0.0],
-            "radiance": list(s.emission) if s.emission is not None else [0.0, 0.0, 0.0],
-        })
+        shapes.append(
+            {
+                "mesh": s.mesh,
+                "kind": s.kind,
+                "interior": index[s.interior] if s.interior else -1,
+                "exterior": -1,
+                "albedo": list(s.albedo) if s.albedo is not None else [0.0, 0.0, 0.0],
+                "radiance": list(s.emission) if s.emission is not None else [0.0, 0.0, 0.0],
+            }
+        )
     core: dict[str, Any] = {
-        "media": [{"sigma_s": list(m.sigma_s), "sigma_a": list(m.sigma_a), "g": m.g, "ior": m.ior}
-                  for m in scene.media.values()],
-        "shapes": shapes, "point_lights": [], "directional_lights": [], "environment_radiance": [0.0, 0.0, 0.0],
+        "media": [
+            {"sigma_s": list(m.sigma_s), "sigma_a": list(m.sigma_a), "g": m.g, "ior": m.ior}
+            for m in scene.media.values()
+        ],
+        "shapes": shapes,
+        "point_lights": [],
+        "directional_lights": [],
+        "environment_radiance": [0.0, 0.0, 0.0],
         "ambient_ior": 1.0,
         "camera": {**asdict(scene.camera), "medium": index[scene.camera.medium] if scene.camera.medium else -1},
-        "film": {"frame_mode": "steady" if scene.film.mode == "steady" else scene.film.frame_mode,
-                 "temporal_bins": scene.film.temporal_bins, "start_opl": scene.film.start_opl,
-                 "bin_width_opl": scene.film.bin_width_opl},
+        "film": {
+            "frame_mode": "steady" if scene.film.mode == "steady" else scene.film.frame_mode,
+            "temporal_bins": scene.film.temporal_bins,
+            "start_opl": scene.film.start_opl,
+            "bin_width_opl": scene.film.bin_width_opl,
+        },
     }
     for light in scene.lights:
         if light["type"] == "sun":
             if light["model"] == "disk":
                 omitted.append(f"sun angular size {light['angular_diameter_deg']} deg (PTPB uses a directional sun)")
-            core["directional_lights"].append({"to_sun": light["to_sun"], "irradiance": light["irradiance"],
-                                               "reference_point": light.get("reference_point")})
+            core["directional_lights"].append(
+                {
+                    "to_sun": light["to_sun"],
+                    "irradiance": light["irradiance"],
+                    "reference_point": light.get("reference_point"),
+                }
+            )
         elif light["type"] == "sky":
             core["environment_radiance"] = list(light["radiance"])
         elif light["type"] == "point":
-            core["point_lights"].append({"position": light["position"], "intensity": light["intensity"],
-                                         "medium": index[light["medium"]] if light.get("medium") else -1})
+            core["point_lights"].append(
+                {
+                    "position": light["position"],
+                    "intensity": light["intensity"],
+                    "medium": index[light["medium"]] if light.get("medium") else -1,
+                }
+            )
         else:
             omitted.append(f"{light['type']} light (not supported by the PTPB core)")
     return core, omitted
 
 
-__all__ = ["Camera", "Film", "Medium", "Shape", "Scene", "sun_direction", "bounding_sphere_of_points",
-           "sun_tau_origin", "camera_ray_direction", "project_to_pixel", "tan_half_fov", "pixel_footprint",
-           "to_ptpb_core", "SCENE_FORMAT", "SCENE_VERSION"]
+__all__ = [
+    "Camera",
+    "Film",
+    "Medium",
+    "Shape",
+    "Scene",
+    "sun_direction",
+    "bounding_sphere_of_points",
+    "sun_tau_origin",
+    "camera_ray_direction",
+    "project_to_pixel",
+    "tan_half_fov",
+    "pixel_footprint",
+    "to_ptpb_core",
+    "SCENE_FORMAT",
+    "SCENE_VERSION",
+]

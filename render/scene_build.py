@@ -13,6 +13,7 @@ Placement rules:
 - An ``auto`` film window starts at the earliest single-scattering arrival seen by the camera and
   ends ``window_tail_opl`` after the latest one.
 """
+
 from __future__ import annotations
 
 import logging
@@ -29,8 +30,17 @@ from render import optics as optics_mod
 from render import shapes
 from render.ply import read_ply, write_ply
 from render.scene import (
-    Camera, Film, Medium, Scene, Shape, bounding_sphere_of_points, camera_ray_direction, sun_direction,
-    sun_tau_origin, tan_half_fov, to_ptpb_core,
+    Camera,
+    Film,
+    Medium,
+    Scene,
+    Shape,
+    bounding_sphere_of_points,
+    camera_ray_direction,
+    sun_direction,
+    sun_tau_origin,
+    tan_half_fov,
+    to_ptpb_core,
 )
 
 log = logging.getLogger(__name__)
@@ -39,6 +49,7 @@ PENITENTE_MESH = "penitentes.ply"
 
 
 # ---------------------------------------------------------------- media
+
 
 def medium_optics(cfg: MediumConfig, medium_id: str) -> optics_mod.MediumOptics:
     """Resolve one ``scene.media.<id>`` entry into a medium in its render form."""
@@ -55,17 +66,31 @@ def medium_optics(cfg: MediumConfig, medium_id: str) -> optics_mod.MediumOptics:
             p = cfg.physical
             extra = {"black_carbon_ng_per_g": p.black_carbon_ng_per_g, "dust_ug_per_g": p.dust_ug_per_g}
             if p.kind == "snow":
-                base = optics_mod.derive_snow(p.density, ssa=p.ssa, optical_radius=p.optical_radius,
-                                              absorption_enhancement=p.absorption_enhancement,
-                                              g0_natural=p.g0_natural, name=medium_id, **extra)
+                base = optics_mod.derive_snow(
+                    p.density,
+                    ssa=p.ssa,
+                    optical_radius=p.optical_radius,
+                    absorption_enhancement=p.absorption_enhancement,
+                    g0_natural=p.g0_natural,
+                    name=medium_id,
+                    **extra,
+                )
             elif p.kind == "bubbly_ice":
                 base = optics_mod.derive_bubbly_ice(p.density, p.bubble_radius, g=p.g, name=medium_id, **extra)
             else:
                 base = optics_mod.derive_clear_ice(haze_sigma_s=p.haze_sigma_s, g=p.g, name=medium_id)
         else:
             c = cfg.coefficients
-            base = optics_mod.MediumOptics(tuple(c.sigma_s), tuple(c.sigma_a), (c.g,) * 3, (c.ior,) * 3,
-                                           cfg.boundary or "null", "full", medium_id, "explicit coefficients")
+            base = optics_mod.MediumOptics(
+                tuple(c.sigma_s),
+                tuple(c.sigma_a),
+                (c.g,) * 3,
+                (c.ior,) * 3,
+                cfg.boundary or "null",
+                "full",
+                medium_id,
+                "explicit coefficients",
+            )
         # Grain and bubble media render in the diffraction-removed form by default (snow_optics.md §4);
         # literal sets, explicit coefficients and clear ice stay as given.
         granular = base.inputs.get("ssa_m2_kg") is not None or base.inputs.get("bubble_radius_m") is not None
@@ -82,12 +107,22 @@ def medium_optics(cfg: MediumConfig, medium_id: str) -> optics_mod.MediumOptics:
 
 
 def scene_medium(medium: optics_mod.MediumOptics) -> Medium:
-    return Medium(sigma_s=medium.sigma_s, sigma_a=medium.sigma_a, g=medium.render_g, ior=medium.region_ior,
-                  boundary=medium.boundary, g_rgb=medium.g, material_ior_rgb=medium.ior, form=medium.form,
-                  name=medium.name, source=medium.source)
+    return Medium(
+        sigma_s=medium.sigma_s,
+        sigma_a=medium.sigma_a,
+        g=medium.render_g,
+        ior=medium.region_ior,
+        boundary=medium.boundary,
+        g_rgb=medium.g,
+        material_ior_rgb=medium.ior,
+        form=medium.form,
+        name=medium.name,
+        source=medium.source,
+    )
 
 
 # ---------------------------------------------------------------- objects
+
 
 def _object_mesh(obj: ObjectConfig, penitentes: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
     where = f"scene.objects '{obj.name}'"
@@ -103,7 +138,9 @@ def _object_mesh(obj: ObjectConfig, penitentes: tuple[np.ndarray, np.ndarray] | 
     if obj.shape == "slab":
         top = 0.0 if obj.top_z is None else obj.top_z
         c, s = np.asarray(obj.center), np.asarray(obj.size)
-        return shapes.box_mesh((c[0] - s[0] / 2, c[1] - s[1] / 2, top - obj.thickness), (c[0] + s[0] / 2, c[1] + s[1] / 2, top))
+        return shapes.box_mesh(
+            (c[0] - s[0] / 2, c[1] - s[1] / 2, top - obj.thickness), (c[0] + s[0] / 2, c[1] + s[1] / 2, top)
+        )
     if obj.shape == "snowpack":
         top = 0.0 if obj.top_z is None else obj.top_z
         if penitentes is None:
@@ -129,20 +166,26 @@ def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> None:
     if not np.all(np.isfinite(vertices)):
         raise ValueError(f"object '{name}': the mesh has NaN or infinite vertices")
     if int(np.max(faces)) >= len(vertices):
-        raise ValueError(f"object '{name}': face {int(np.argmax(np.max(faces, axis=1)))} refers to vertex "
-                         f"{int(np.max(faces))}, but the mesh has {len(vertices)} vertices")
+        raise ValueError(
+            f"object '{name}': face {int(np.argmax(np.max(faces, axis=1)))} refers to vertex "
+            f"{int(np.max(faces))}, but the mesh has {len(vertices)} vertices"
+        )
     import manifold3d
 
-    solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(vertices, np.float32),
-                                                tri_verts=np.asarray(faces, np.uint32)))
+    solid = manifold3d.Manifold(
+        manifold3d.Mesh(vert_properties=np.asarray(vertices, np.float32), tri_verts=np.asarray(faces, np.uint32))
+    )
     if solid.status() != manifold3d.Error.NoError:
-        raise ValueError(f"object '{name}': the mesh is not a closed manifold ({solid.status().name}); "
-                         "media need watertight boundaries; repair it (e.g. pymeshlab) or use another shape")
+        raise ValueError(
+            f"object '{name}': the mesh is not a closed manifold ({solid.status().name}); "
+            "media need watertight boundaries; repair it (e.g. pymeshlab) or use another shape"
+        )
     if solid.volume() <= 0:
         raise ValueError(f"object '{name}': the mesh encloses no volume (inverted or flat); flip its faces")
 
 
 # ---------------------------------------------------------------- camera, lights, film
+
 
 def frame_camera(cfg: CameraConfig, centre: np.ndarray, radius: float) -> Camera:
     """A camera looking at ``centre`` from the configured azimuth and elevation, far enough back
@@ -152,8 +195,16 @@ def frame_camera(cfg: CameraConfig, centre: np.ndarray, radius: float) -> Camera
     distance = cfg.frame_margin * radius / math.sin(half)
     direction = sun_direction(cfg.view_elevation_deg, cfg.view_azimuth_deg)
     origin = np.asarray(centre) + distance * direction
-    return Camera(tuple(float(v) for v in origin), tuple(float(v) for v in centre), tuple(cfg.up), cfg.fov,
-                  cfg.width, cfg.height, cfg.fov_axis, cfg.medium)
+    return Camera(
+        tuple(float(v) for v in origin),
+        tuple(float(v) for v in centre),
+        tuple(cfg.up),
+        cfg.fov,
+        cfg.width,
+        cfg.height,
+        cfg.fov_axis,
+        cfg.medium,
+    )
 
 
 def site_sun_direction(latitude: float, day_of_year: float, solar_time_h: float) -> np.ndarray:
@@ -163,12 +214,16 @@ def site_sun_direction(latitude: float, day_of_year: float, solar_time_h: float)
     hour_angle = math.radians(15.0 * (solar_time_h - 12.0))
     sun = sunpath.sun_vector(latitude, float(sunpath.declination(day_of_year)), hour_angle)
     if sun[2] <= 0.01:
-        raise ValueError(f"scene.sun.solar_time_h={solar_time_h}: the sun is below the horizon at latitude "
-                         f"{latitude} deg on day {day_of_year:.0f}; choose a daytime hour")
+        raise ValueError(
+            f"scene.sun.solar_time_h={solar_time_h}: the sun is below the horizon at latitude "
+            f"{latitude} deg on day {day_of_year:.0f}; choose a daytime hour"
+        )
     return np.asarray(sun, dtype=np.float64)
 
 
-def _lights(cfg: SceneConfig, site: dict | None, centre: np.ndarray, radius: float) -> tuple[list[dict], list[Shape], list]:
+def _lights(
+    cfg: SceneConfig, site: dict | None, centre: np.ndarray, radius: float
+) -> tuple[list[dict], list[Shape], list]:
     lights: list[dict[str, Any]] = []
     emitters: list[Shape] = []
     meshes = []
@@ -183,13 +238,18 @@ def _lights(cfg: SceneConfig, site: dict | None, centre: np.ndarray, radius: flo
             to_sun = site_sun_direction(site["latitude"], site["day_of_year"], sun.solar_time_h)
         else:
             to_sun = sun_direction(sun.elevation_deg, sun.azimuth_deg)
-        lights.append({
-            "type": "sun", "model": sun.kind, "to_sun": [float(v) for v in to_sun], "irradiance": list(sun.irradiance),
-            "angular_diameter_deg": sun.angular_diameter_deg,
-            "tau_origin_point": [float(v) for v in sun_tau_origin(to_sun, centre, radius, sun.reference_point)],
-            "reference_point": list(sun.reference_point) if sun.reference_point is not None else None,
-            "disk_distance_radii": sun.disk_distance_radii,
-        })
+        lights.append(
+            {
+                "type": "sun",
+                "model": sun.kind,
+                "to_sun": [float(v) for v in to_sun],
+                "irradiance": list(sun.irradiance),
+                "angular_diameter_deg": sun.angular_diameter_deg,
+                "tau_origin_point": [float(v) for v in sun_tau_origin(to_sun, centre, radius, sun.reference_point)],
+                "reference_point": list(sun.reference_point) if sun.reference_point is not None else None,
+                "disk_distance_radii": sun.disk_distance_radii,
+            }
+        )
     if max(cfg.sky.radiance) > 0:
         lights.append({"type": "sky", "radiance": list(cfg.sky.radiance)})
     for i, area in enumerate(cfg.area_lights):
@@ -205,19 +265,32 @@ def _lights(cfg: SceneConfig, site: dict | None, centre: np.ndarray, radius: flo
             mesh = shapes.disk_mesh(area.center, normal, area.radius)
         name = f"area_light_{i}"
         meshes.append((name, mesh))
-        emitters.append(Shape(name=name, mesh=f"meshes/{name}.ply", kind="diffuse", albedo=(0.0, 0.0, 0.0),
-                              emission=tuple(area.radiance)))
+        emitters.append(
+            Shape(
+                name=name,
+                mesh=f"meshes/{name}.ply",
+                kind="diffuse",
+                albedo=(0.0, 0.0, 0.0),
+                emission=tuple(area.radiance),
+            )
+        )
     for p in cfg.pulse_lights:
         light = {"type": p.kind, "position": list(p.position), "intensity": list(p.intensity), "medium": p.medium}
         if p.kind == "spot":
-            light.update(direction=list(p.direction), cutoff_angle_deg=p.cutoff_angle_deg,
-                         beam_width_deg=p.beam_width_deg)
+            light.update(
+                direction=list(p.direction), cutoff_angle_deg=p.cutoff_angle_deg, beam_width_deg=p.beam_width_deg
+            )
         lights.append(light)
     return lights, emitters, meshes
 
 
-def direct_arrivals(camera: Camera, lights: list[dict], meshes: list[tuple[np.ndarray, np.ndarray]],
-                    emitter_centres: list[np.ndarray], max_rays: int = 16384) -> np.ndarray:
+def direct_arrivals(
+    camera: Camera,
+    lights: list[dict],
+    meshes: list[tuple[np.ndarray, np.ndarray]],
+    emitter_centres: list[np.ndarray],
+    max_rays: int = 16384,
+) -> np.ndarray:
     """OPL of single-scattered light at the surfaces the camera sees, light -> surface point -> pinhole,
     on a grid over the film (its edges included: jittered rays reach the pixel corners).
 
@@ -230,8 +303,10 @@ def direct_arrivals(camera: Camera, lights: list[dict], meshes: list[tuple[np.nd
         engine.add_mesh(np.asarray(v, np.float32), np.asarray(f, np.uint32), i)
     engine.commit()
     step = max(1.0, math.sqrt(camera.width * camera.height / max_rays))
-    px, py = np.meshgrid(np.linspace(0, camera.width, int(camera.width / step) + 1),
-                         np.linspace(0, camera.height, int(camera.height / step) + 1))
+    px, py = np.meshgrid(
+        np.linspace(0, camera.width, int(camera.width / step) + 1),
+        np.linspace(0, camera.height, int(camera.height / step) + 1),
+    )
     directions = camera_ray_direction(camera, px.ravel(), py.ravel()).reshape(-1, 3)
     origins = np.broadcast_to(np.asarray(camera.origin), directions.shape)
     hits = engine.intersect(origins, directions)
@@ -255,19 +330,28 @@ def fit_window(film: FilmConfig, arrivals: np.ndarray) -> Film:
         start, width = film.start_opl, film.bin_width_opl
     else:
         if not np.any(np.isfinite(arrivals)):
-            raise ValueError("scene.film.window is auto, but the camera sees no lit surface; aim the camera "
-                             "(scene.camera) or set scene.film.window: manual with start_opl and bin_width_opl")
+            raise ValueError(
+                "scene.film.window is auto, but the camera sees no lit surface; aim the camera "
+                "(scene.camera) or set scene.film.window: manual with start_opl and bin_width_opl"
+            )
         earliest, latest = float(np.nanmin(arrivals)), float(np.nanmax(arrivals)) + film.window_tail_opl
         start = earliest - 0.02 * (latest - earliest)
         width = (latest - start) / film.temporal_bins
-    return Film(mode=film.mode, temporal_bins=film.temporal_bins if film.mode == "transient" else 1,
-                start_opl=float(start), bin_width_opl=float(width), frame_mode=film.frame_mode)
+    return Film(
+        mode=film.mode,
+        temporal_bins=film.temporal_bins if film.mode == "transient" else 1,
+        start_opl=float(start),
+        bin_width_opl=float(width),
+        frame_mode=film.frame_mode,
+    )
 
 
 # ---------------------------------------------------------------- the stage
 
-def build_scene(cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = None,
-                site: dict | None = None) -> tuple[Scene, dict[str, optics_mod.MediumOptics]]:
+
+def build_scene(
+    cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = None, site: dict | None = None
+) -> tuple[Scene, dict[str, optics_mod.MediumOptics]]:
     """Write meshes under ``out_dir/meshes``; return the resolved scene (not yet saved) and its media.
 
     ``site`` = {"latitude": deg, "day_of_year": day} feeds ``scene.sun.solar_time_h``.
@@ -277,8 +361,10 @@ def build_scene(cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = 
     if any(o.shape == "penitentes" for o in cfg.objects):
         path = Path(geometry_dir or "") / PENITENTE_MESH
         if geometry_dir is None or not path.is_file():
-            raise FileNotFoundError(f"{path}: the scene has a penitentes object but the geometry stage's mesh is "
-                                    "missing; run the geometry stage first")
+            raise FileNotFoundError(
+                f"{path}: the scene has a penitentes object but the geometry stage's mesh is "
+                "missing; run the geometry stage first"
+            )
         penitentes = read_ply(path)
     media = {key: medium_optics(m, key) for key, m in cfg.media.items()}
     meshes: list[tuple[str, tuple[np.ndarray, np.ndarray]]] = []
@@ -295,8 +381,16 @@ def build_scene(cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = 
     all_points = np.concatenate([m[1][0] for m in meshes])
     centre, radius = bounding_sphere_of_points(all_points)
     if cfg.camera.placement == "look_at":
-        camera = Camera(tuple(cfg.camera.origin), tuple(cfg.camera.target), tuple(cfg.camera.up), cfg.camera.fov,
-                        cfg.camera.width, cfg.camera.height, cfg.camera.fov_axis, cfg.camera.medium)
+        camera = Camera(
+            tuple(cfg.camera.origin),
+            tuple(cfg.camera.target),
+            tuple(cfg.camera.up),
+            cfg.camera.fov,
+            cfg.camera.width,
+            cfg.camera.height,
+            cfg.camera.fov_axis,
+            cfg.camera.medium,
+        )
     else:
         framed = penitentes[0] if penitentes is not None else all_points
         lo, hi = framed.min(0), framed.max(0)
@@ -310,34 +404,50 @@ def build_scene(cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = 
         centre, radius = bounding_sphere_of_points(np.concatenate([all_points] + [m[1][0] for m in light_meshes]))
         for light in lights:
             if light["type"] == "sun":
-                light["tau_origin_point"] = [float(v) for v in sun_tau_origin(
-                    np.asarray(light["to_sun"]), centre, radius, light["reference_point"])]
-    arrivals = direct_arrivals(camera, lights, [m[1] for m in meshes],
-                               [np.asarray(m[1][0], np.float64).mean(0) for m in light_meshes])
+                light["tau_origin_point"] = [
+                    float(v)
+                    for v in sun_tau_origin(np.asarray(light["to_sun"]), centre, radius, light["reference_point"])
+                ]
+    arrivals = direct_arrivals(
+        camera, lights, [m[1] for m in meshes], [np.asarray(m[1][0], np.float64).mean(0) for m in light_meshes]
+    )
     film = fit_window(cfg.film, arrivals)
     if arrivals.shape[0] and np.any(np.isfinite(arrivals)):
         from render.figures import arrival_map
 
         first = np.nanmin(np.where(np.isfinite(arrivals), arrivals, np.inf), axis=0)
-        arrival_map(np.where(np.isfinite(first), first, np.nan), out_dir / "first_arrival.png",
-                    "earliest direct light, light -> surface -> camera")
+        arrival_map(
+            np.where(np.isfinite(first), first, np.nan),
+            out_dir / "first_arrival.png",
+            "earliest direct light, light -> surface -> camera",
+        )
     (out_dir / "meshes").mkdir(parents=True, exist_ok=True)
     for name, (v, f) in meshes + light_meshes:
         write_ply(out_dir / "meshes" / f"{name}.ply", v, f, comment=f"{name}: metres, x east, y north, z up")
     notes = [f"{key}: {m.source}; form {m.form}; boundary {m.boundary}" for key, m in media.items()]
-    scene = Scene(camera=camera, film=film, media={k: scene_medium(m) for k, m in media.items()},
-                  shapes=scene_shapes + emitters, lights=lights, max_depth=cfg.max_depth, rr_depth=cfg.rr_depth,
-                  bounding_sphere={"center": [float(v) for v in centre], "radius": radius}, notes=notes)
+    scene = Scene(
+        camera=camera,
+        film=film,
+        media={k: scene_medium(m) for k, m in media.items()},
+        shapes=scene_shapes + emitters,
+        lights=lights,
+        max_depth=cfg.max_depth,
+        rr_depth=cfg.rr_depth,
+        bounding_sphere={"center": [float(v) for v in centre], "radius": radius},
+        notes=notes,
+    )
     return scene, media
 
 
-def run_scene_stage(cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = None,
-                    site: dict | None = None) -> dict:
+def run_scene_stage(
+    cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = None, site: dict | None = None
+) -> dict:
     """Build and write the scene folder; return a small summary."""
     out_dir = Path(out_dir)
     scene, media = build_scene(cfg, out_dir, geometry_dir=geometry_dir, site=site)
-    optics_report = {key: {"medium": m.to_dict(), "derived": optics_mod.derived_quantities(m).to_dict()}
-                     for key, m in media.items()}
+    optics_report = {
+        key: {"medium": m.to_dict(), "derived": optics_mod.derived_quantities(m).to_dict()} for key, m in media.items()
+    }
     write_json_atomic(out_dir / "optics.json", optics_report)
     core, omitted = to_ptpb_core(scene)
     for item in omitted:
@@ -347,16 +457,38 @@ def run_scene_stage(cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | Non
     scene.save(out_dir / "scene.json")
     film = scene.film
     return {
-        "camera_origin": list(scene.camera.origin), "camera_target": list(scene.camera.target),
+        "camera_origin": list(scene.camera.origin),
+        "camera_target": list(scene.camera.target),
         "bounding_radius_m": scene.bounding_sphere["radius"],
-        "film": {"mode": film.mode, "temporal_bins": film.temporal_bins, "start_opl": film.start_opl,
-                 "bin_width_opl": film.bin_width_opl, "frame_mode": film.frame_mode},
-        "media": {k: {"sigma_s": list(m.sigma_s), "sigma_a": list(m.sigma_a), "g": m.render_g, "form": m.form,
-                      "diffuse_albedo": optics_report[k]["derived"]["diffuse_albedo"],
-                      "efolding_depth_m": optics_report[k]["derived"]["efolding_depth"]} for k, m in media.items()},
+        "film": {
+            "mode": film.mode,
+            "temporal_bins": film.temporal_bins,
+            "start_opl": film.start_opl,
+            "bin_width_opl": film.bin_width_opl,
+            "frame_mode": film.frame_mode,
+        },
+        "media": {
+            k: {
+                "sigma_s": list(m.sigma_s),
+                "sigma_a": list(m.sigma_a),
+                "g": m.render_g,
+                "form": m.form,
+                "diffuse_albedo": optics_report[k]["derived"]["diffuse_albedo"],
+                "efolding_depth_m": optics_report[k]["derived"]["efolding_depth"],
+            }
+            for k, m in media.items()
+        },
         "omitted_by_ptpb": omitted,
     }
 
 
-__all__ = ["medium_optics", "scene_medium", "frame_camera", "site_sun_direction", "direct_arrivals", "fit_window",
-           "build_scene", "run_scene_stage"]
+__all__ = [
+    "medium_optics",
+    "scene_medium",
+    "frame_camera",
+    "site_sun_direction",
+    "direct_arrivals",
+    "fit_window",
+    "build_scene",
+    "run_scene_stage",
+]

@@ -4,6 +4,7 @@ Every function returns ``(vertices, faces)``: float32 ``(N, 3)`` positions in me
 ``(M, 3)`` vertex indices. Closed shapes wind counter-clockwise seen from outside, so the
 right-hand normal ``(v1 - v0) x (v2 - v0)`` points outwards.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,16 +32,47 @@ def sphere_mesh(center=(0.0, 0.0, 0.0), radius: float = 1.0, subdivisions: int =
     if radius <= 0:
         raise ValueError(f"sphere radius must be positive, got {radius}")
     t = (1.0 + 5.0**0.5) / 2.0
-    verts = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
-             (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    verts = [
+        (-1, t, 0),
+        (1, t, 0),
+        (-1, -t, 0),
+        (1, -t, 0),
+        (0, -1, t),
+        (0, 1, t),
+        (0, -1, -t),
+        (0, 1, -t),
+        (t, 0, -1),
+        (t, 0, 1),
+        (-t, 0, -1),
+        (-t, 0, 1),
+    ]
+    faces = [
+        (0, 11, 5),
+        (0, 5, 1),
+        (0, 1, 7),
+        (0, 7, 10),
+        (0, 10, 11),
+        (1, 5, 9),
+        (5, 11, 4),
+        (11, 10, 2),
+        (10, 7, 6),
+        (7, 1, 8),
+        (3, 9, 4),
+        (3, 4, 2),
+        (3, 2, 6),
+        (3, 6, 8),
+        (3, 8, 9),
+        (4, 9, 5),
+        (2, 4, 11),
+        (6, 2, 10),
+        (8, 6, 7),
+        (9, 8, 1),
+    ]
     v = [np.asarray(p, dtype=np.float64) / np.linalg.norm(p) for p in verts]
     for _ in range(subdivisions):
         midpoint_cache: dict[tuple[int, int], int] = {}
 
-        def midpoint(i: int, j: int) -> int:
+        def midpoint(i: int, j: int, midpoint_cache: dict[tuple[int, int], int] = midpoint_cache) -> int:
             key = (min(i, j), max(i, j))
             if key not in midpoint_cache:
                 m = v[i] + v[j]
@@ -89,16 +121,16 @@ def frame_mesh(inner_lower, inner_upper, margin: float, top_z: float, thickness:
     if not (x1 > x0 and y1 > y0 and margin > 0 and thickness > 0):
         raise ValueError("frame_mesh needs a non-empty inner footprint and positive margin and thickness")
     X0, Y0, X1, Y1 = x0 - margin, y0 - margin, x1 + margin, y1 + margin
-    ring = [(X0, Y0), (X1, Y0), (X1, Y1), (X0, Y1)]     # outer, counter-clockwise from above
-    hole = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]     # inner, same order
+    ring = [(X0, Y0), (X1, Y0), (X1, Y1), (X0, Y1)]  # outer, counter-clockwise from above
+    hole = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]  # inner, same order
     z_bottom = top_z - thickness
     vertices = [(x, y, z) for z in (z_bottom, top_z) for x, y in ring + hole]
     # Indices: bottom outer 0-3, bottom inner 4-7, top outer 8-11, top inner 12-15.
     faces = []
     for i in range(4):
         j = (i + 1) % 4
-        faces += [(8 + i, 8 + j, 12 + j), (8 + i, 12 + j, 12 + i)]      # top annulus, normal +z
-        faces += [(i, 4 + j, j), (i, 4 + i, 4 + j)]                      # bottom annulus, normal -z
-        faces += [(i, j, 8 + j), (i, 8 + j, 8 + i)]                      # outer walls, outwards
-        faces += [(4 + i, 12 + j, 4 + j), (4 + i, 12 + i, 12 + j)]      # inner walls, towards the hole
+        faces += [(8 + i, 8 + j, 12 + j), (8 + i, 12 + j, 12 + i)]  # top annulus, normal +z
+        faces += [(i, 4 + j, j), (i, 4 + i, 4 + j)]  # bottom annulus, normal -z
+        faces += [(i, j, 8 + j), (i, 8 + j, 8 + i)]  # outer walls, outwards
+        faces += [(4 + i, 12 + j, 4 + j), (4 + i, 12 + i, 12 + j)]  # inner walls, towards the hole
     return np.asarray(vertices, dtype=np.float32), np.asarray(faces, dtype=np.uint32)

@@ -4,6 +4,7 @@ The default exposure is global: one scale for every frame, chosen so that a high
 the luminance over all frames maps to ``key``. Brightness therefore evolves as the light does,
 and a frame holding more energy is never shown darker (the mapping is monotonic per pixel).
 """
+
 from __future__ import annotations
 
 from typing import Literal

@@ -1,8 +1,9 @@
 """H.264 videos of transient frames, with a burned-in time stamp, an optional title and scale bar."""
+
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import av
 import numpy as np
@@ -59,7 +60,12 @@ def annotate(
         draw.rectangle((x0, yb - 3, x1, yb), fill=(255, 255, 255))
         if scale_bar_label:
             box = draw.textbbox((0, 0), scale_bar_label, font=font)
-            draw.text((x1 - (box[2] - box[0]), yb - 6 - (box[3] - box[1]) - 4), scale_bar_label, fill=(255, 255, 255), font=font)
+            draw.text(
+                (x1 - (box[2] - box[0]), yb - 6 - (box[3] - box[1]) - 4),
+                scale_bar_label,
+                fill=(255, 255, 255),
+                font=font,
+            )
     return np.asarray(pil)
 
 

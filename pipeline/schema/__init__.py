@@ -1,4 +1,5 @@
 """The config schema: the root model composed of one section per stage."""
+
 from __future__ import annotations
 
 from pydantic import Field
@@ -20,12 +21,26 @@ class Config(StrictModel):
     )
     seed: int = Field(1, ge=0, le=2**63 - 1, description="Seed of every random stream of the run [-].")
     threads: int = Field(0, ge=0, le=1024, description="Worker threads for the C++ core; 0 uses every core [-].")
-    runs_dir: str = Field("runs", min_length=1, description="Folder that holds run outputs, relative to the working directory [path].")
-    geometry: GeometryConfig = Field(default_factory=GeometryConfig, description="The geometry stage: growing and meshing the field.")
-    scene: SceneConfig = Field(default_factory=SceneConfig, description="The scene stage: camera, lights, media, objects, film.")
-    reference: ReferenceConfig = Field(default_factory=ReferenceConfig, description="The reference stage: Mitsuba 3 volpath and mitransient.")
-    render: PTPBConfig = Field(default_factory=PTPBConfig, description="The render stage: our PTPB renderer (seed and threads come from the root).")
-    composite: CompositeConfig = Field(default_factory=CompositeConfig, description="The composite and compare stages: videos, streaks, figures, tables.")
+    runs_dir: str = Field(
+        "runs", min_length=1, description="Folder that holds run outputs, relative to the working directory [path]."
+    )
+    geometry: GeometryConfig = Field(
+        default_factory=GeometryConfig, description="The geometry stage: growing and meshing the field."
+    )
+    scene: SceneConfig = Field(
+        default_factory=SceneConfig, description="The scene stage: camera, lights, media, objects, film."
+    )
+    reference: ReferenceConfig = Field(
+        default_factory=ReferenceConfig, description="The reference stage: Mitsuba 3 volpath and mitransient."
+    )
+    render: PTPBConfig = Field(
+        default_factory=PTPBConfig,
+        description="The render stage: our PTPB renderer (seed and threads come from the root).",
+    )
+    composite: CompositeConfig = Field(
+        default_factory=CompositeConfig,
+        description="The composite and compare stages: videos, streaks, figures, tables.",
+    )
 
 
 __all__ = ["Config", "StrictModel"]

@@ -1,5 +1,6 @@
 """The base of every config model: unknown keys are errors, NaN and infinite numbers are refused, and
 values are validated on assignment."""
+
 from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict

@@ -1,7 +1,8 @@
 """How transient frames become videos, streak images and comparison figures."""
+
 from __future__ import annotations
 
-from typing import Literal, Optional
+from typing import Literal
 
 from pydantic import Field
 
@@ -15,31 +16,35 @@ class CompositeConfig(StrictModel):
         "filmic", description="Tone curve applied after exposure: reinhard, filmic (ACES fit) or linear clip [-]."
     )
     exposure_percentile: float = Field(
-        99.5, gt=50, le=100,
+        99.5,
+        gt=50,
+        le=100,
         description="Percentile of positive luminance, over all frames, that maps to display white-ish (key 1) [%].",
     )
     per_frame_exposure: bool = Field(
         False, description="Normalise each frame on its own instead of one exposure for the clip [-]."
     )
     fps: float = Field(12.0, gt=0, le=240, description="Video frame rate [frames/s]; ignored when slow_motion is set.")
-    slow_motion: Optional[float] = Field(
-        None, gt=0,
+    slow_motion: float | None = Field(
+        None,
+        gt=0,
         description="Slow-motion factor: video seconds per second of light time [-]. Sets the frame rate from bin_width_opl.",
     )
     time_unit: Literal["ps", "ns"] = Field("ps", description="Unit of the burned-in time stamp [-].")
-    title: Optional[str] = Field(None, max_length=120, description="Title burned into the videos [-].")
-    scale_bar_m: Optional[float] = Field(
+    title: str | None = Field(None, max_length=120, description="Title burned into the videos [-].")
+    scale_bar_m: float | None = Field(
         0.5, gt=0, description="Length of the scale bar at the camera target's distance [m]; null hides it."
     )
     video_min_height: int = Field(
         480, ge=64, le=4320, description="Small renders are upscaled (nearest neighbour) to at least this height [px]."
     )
-    streak_row: Optional[int] = Field(None, ge=0, description="Image row of the x–t streak image [px]; null = middle.")
-    streak_column: Optional[int] = Field(None, ge=0, description="Image column of the y–t streak image [px]; null = middle.")
+    streak_row: int | None = Field(None, ge=0, description="Image row of the x–t streak image [px]; null = middle.")
+    streak_column: int | None = Field(
+        None, ge=0, description="Image column of the y–t streak image [px]; null = middle."
+    )
     difference_vmax: float = Field(
         0.5, gt=0, description="Upper end of the relative-difference colour scale in comparisons [-]."
     )
-
 
     def frame_rate(self, bin_width_opl: float) -> float:
         """Frames per second of video: from slow_motion when set, else ``fps``."""

@@ -3,6 +3,7 @@
 Defaults describe Tapado Glacier, Chile (30.1 deg S) from 25 Nov for 40 days on a demo-sized grid;
 site presets in configs/presets/sites/ override them. Symbols follow penitentes.md section 4.
 """
+
 from __future__ import annotations
 
 from typing import Literal
@@ -17,7 +18,9 @@ class GeometryConfig(StrictModel):
 
     # Site and season
     latitude: float = Field(-30.1, ge=-89.0, le=89.0, description="Site latitude phi, negative south [deg].")
-    start_day_of_year: int = Field(329, ge=1, le=366, description="First simulated day (1 = 1 January; 329 = 25 Nov) [day].")
+    start_day_of_year: int = Field(
+        329, ge=1, le=366, description="First simulated day (1 = 1 January; 329 = 25 Nov) [day]."
+    )
     days: int = Field(40, ge=1, le=400, description="Simulated days of sun [day].")
     sun_positions_per_day: int = Field(12, ge=1, le=96, description="Sun positions sampling each day's daylight [-].")
     horizon_refreshes_per_day: int = Field(
@@ -27,53 +30,72 @@ class GeometryConfig(StrictModel):
         1000.0, gt=0, le=1400, description="Clear-sky direct normal irradiance S_b with the sun at the zenith [W m-2]."
     )
     optical_depth: float = Field(
-        0.08, ge=0, le=2, description="Broadband extinction per extra air mass, S_b(e) = S_b exp(-tau (1/sin e - 1)) [-]."
+        0.08,
+        ge=0,
+        le=2,
+        description="Broadband extinction per extra air mass, S_b(e) = S_b exp(-tau (1/sin e - 1)) [-].",
     )
     diffuse_fraction: float = Field(
         0.07, ge=0, le=1, description="Diffuse sky on a level surface as a fraction of S_b sin(e), S_d [-]."
     )
 
     # Material
-    albedo: float = Field(0.55, gt=0, lt=1, description="Local broadband albedo a of a flat patch (snow 0.8, glacier ice 0.55) [-].")
+    albedo: float = Field(
+        0.55, gt=0, lt=1, description="Local broadband albedo a of a flat patch (snow 0.8, glacier ice 0.55) [-]."
+    )
     density: float = Field(880.0, ge=50, le=917, description="Bulk density rho (snow 350-600, ice 830-917) [kg m-3].")
 
     # Ablation model
     ablation_efficiency: float = Field(
-        1.0, gt=0, le=1,
+        1.0,
+        gt=0,
+        le=1,
         description="Fraction eps of the absorbed shortwave left after geometry.sky_loss that is spent on ablation; "
-                    "with sky_loss = 0 it alone stands for the longwave and turbulent losses (~0.5) [-].",
+        "with sky_loss = 0 it alone stands for the longwave and turbulent losses (~0.5) [-].",
     )
     sky_loss: float = Field(
-        90.0, ge=0, le=500,
+        90.0,
+        ge=0,
+        le=500,
         description="Net longwave + turbulent loss of a facet open to the sky, averaged over 24 h. Each facet loses it "
-                    "times its sky view factor and each day only the absorbed shortwave above that ablates (on flat "
-                    "Tapado ice this leaves ~46 % of the absorbed shortwave); 0 folds the loss into "
-                    "ablation_efficiency [W m-2].",
+        "times its sky view factor and each day only the absorbed shortwave above that ablates (on flat "
+        "Tapado ice this leaves ~46 % of the absorbed shortwave); 0 folds the loss into "
+        "ablation_efficiency [W m-2].",
     )
-    melt_enabled: bool = Field(True, description="Lliboutry switch on; false = sublimation only (cold lab, planets) [-].")
+    melt_enabled: bool = Field(
+        True, description="Lliboutry switch on; false = sublimation only (cold lab, planets) [-]."
+    )
     switch_proxy: Literal["sky_view", "openness"] = Field(
-        "openness", description="Sheltering proxy of the switch: the sky view of a level receiver at the point (falls "
-                                "toward trough floors), or the facet's own sky view factor (also low on exposed steep "
-                                "walls and crests, which then melt as if sheltered) [-]."
+        "openness",
+        description="Sheltering proxy of the switch: the sky view of a level receiver at the point (falls "
+        "toward trough floors), or the facet's own sky view factor (also low on exposed steep "
+        "walls and crests, which then melt as if sheltered) [-].",
     )
     switch_centre: float = Field(0.85, gt=0, lt=1, description="Switch centre V_c: below it cells start to melt [-].")
     switch_width: float = Field(0.3, gt=0, le=1, description="Switch width dV: melt is complete at V_c - dV [-].")
     diffusivity: float = Field(
-        0.0, ge=0, le=1e-5,
+        0.0,
+        ge=0,
+        le=1e-5,
         description="Diffusive regulariser D; with A_B it selects lambda* = 4 pi D / A_B. Runs on flux time like A_B. "
-                    "Without A_B it only smooths, and at metre-field grids it rounds the 2-4 cell blade walls [m2 s-1].",
+        "Without A_B it only smooths, and at metre-field grids it rounds the 2-4 cell blade walls [m2 s-1].",
     )
     hyperdiffusivity: float = Field(0.0, ge=0, le=1e-8, description="Fourth-order regulariser K [m4 s-1].")
     scattered_light_coefficient: float = Field(
-        0.0, ge=0, le=1e-5,
+        0.0,
+        ge=0,
+        le=1e-5,
         description="Betterton kernel coefficient A_B = 0.5 F/(rho L) at the reference flux; 0 = off [m s-1].",
     )
     scattered_light_reference_flux: float = Field(
-        1000.0, gt=0,
+        1000.0,
+        gt=0,
         description="Horizontal flux F at which A_B and D apply; both run on flux time (the time integral of the "
-                    "actual horizontal flux over F), so lambda* = 4 pi D / A_B at any sun [W m-2].",
+        "actual horizontal flux over F), so lambda* = 4 pi D / A_B at any sun [W m-2].",
     )
-    max_slope_deg: float = Field(85.0, gt=45, lt=90, description="Slope clamp of the height field (overhang limit) [deg].")
+    max_slope_deg: float = Field(
+        85.0, gt=45, lt=90, description="Slope clamp of the height field (overhang limit) [deg]."
+    )
 
     # Grid, initial state and numerics
     grid_cells: int = Field(128, ge=16, le=2048, description="Cells per side of the periodic square grid N [-].")
@@ -104,7 +126,7 @@ class GeometryConfig(StrictModel):
         return self.domain_size / self.grid_cells
 
     @model_validator(mode="after")
-    def _check_resolution(self) -> "GeometryConfig":
+    def _check_resolution(self) -> GeometryConfig:
         spacing = self.domain_size / self.grid_cells
         if self.initial_wavelength < 4 * spacing:
             raise ValueError(

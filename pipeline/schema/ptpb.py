@@ -1,7 +1,8 @@
 """Settings of our Progressive Transient Photon Beams renderer (ptpb.md §6 "Proposed keys")."""
+
 from __future__ import annotations
 
-from typing import Literal, Optional
+from typing import Literal
 
 from pydantic import Field, model_validator
 
@@ -34,15 +35,21 @@ class TimeHalfWidth(StrictModel):
 class PTPBConfig(StrictModel):
     """Our PTPB renderer: light paths per iteration, bandwidth schedules, kernels and budgets."""
 
-    iterations: int = Field(64, ge=1, description="Number of progressive iterations (upper bound unless a time budget is set) [-].")
-    time_budget_s: Optional[float] = Field(
-        None, gt=0, description="Wall-clock budget; when set it overrides `iterations` (stops after the iteration in flight) [s]."
+    iterations: int = Field(
+        64, ge=1, description="Number of progressive iterations (upper bound unless a time budget is set) [-]."
+    )
+    time_budget_s: float | None = Field(
+        None,
+        gt=0,
+        description="Wall-clock budget; when set it overrides `iterations` (stops after the iteration in flight) [s].",
     )
     light_paths_per_iteration: int = Field(
         20000, ge=1, lt=2**32, description="M: light paths launched per iteration; every sum is divided by M [-]."
     )
-    alpha: Optional[float] = Field(
-        None, gt=0, le=1,
+    alpha: float | None = Field(
+        None,
+        gt=0,
+        le=1,
         description="Kernel-volume schedule parameter; null picks 2/3 for gate and 4/5 for bins/steady [-].",
     )
     initial_beam_radius: BeamRadius = Field(
@@ -57,55 +64,74 @@ class PTPBConfig(StrictModel):
         default_factory=lambda: BeamRadius(value=2.0, unit="pixel_footprint"),
         description="r_0, the initial 2D disk kernel radius of the surface photons on diffuse surfaces (ptpb.md §7) [see unit].",
     )
-    surface_alpha: Optional[float] = Field(
-        None, gt=0, le=1,
+    surface_alpha: float | None = Field(
+        None,
+        gt=0,
+        le=1,
         description="Surface kernel-volume schedule parameter; null picks 4/7 for gate (r and T shrink as gamma^(1/3)) "
         "and 2/3 for bins/steady (r shrinks as gamma^(1/2)) [-].",
     )
     surface_normal_cos: float = Field(
-        0.9, gt=0, le=1,
+        0.9,
+        gt=0,
+        le=1,
         description="A surface photon counts only where its normal and the shading normal have at least this cosine [-].",
     )
     spatial_kernel: Literal["box", "epanechnikov"] = Field(
-        "epanechnikov", description="Spatial kernel: 1D k_R of the beams and the matching 2D disk kernel of the surface photons [-]."
+        "epanechnikov",
+        description="Spatial kernel: 1D k_R of the beams and the matching 2D disk kernel of the surface photons [-].",
     )
     temporal_kernel: Literal["box", "epanechnikov", "quintic"] = Field(
         "epanechnikov", description="Temporal kernel K_T of gate mode [-]."
     )
-    photon_beam_kind: Literal["long", "short"] = Field("long", description="Photon beams run to the boundary (long) or to the next vertex (short) [-].")
+    photon_beam_kind: Literal["long", "short"] = Field(
+        "long", description="Photon beams run to the boundary (long) or to the next vertex (short) [-]."
+    )
     query_beam_kind: Literal["long", "short"] = Field("long", description="Camera query segments, long or short [-].")
-    parallel_guard_sin2: float = Field(1e-5, ge=0, lt=1, description="Pairs with sin^2(theta) below this are skipped [-].")
+    parallel_guard_sin2: float = Field(
+        1e-5, ge=0, lt=1, description="Pairs with sin^2(theta) below this are skipped [-]."
+    )
     max_depth: int = Field(64, ge=-1, description="Mitsuba's max_depth: non-null interactions + 1; -1 unbounded [-].")
     rr_depth: int = Field(5, ge=1, description="Depth from which Russian roulette applies on both sides [-].")
     seed: int = Field(0, ge=0, description="Key of every random stream [-].")
     threads: int = Field(0, ge=0, description="Worker threads; 0 uses every core [-].")
     accel: Literal["grid", "embree"] = Field(
-        "embree", description="Beam query structure: uniform grid of diced beams, or an Embree BVH over the same pieces [-]."
+        "embree",
+        description="Beam query structure: uniform grid of diced beams, or an Embree BVH over the same pieces [-].",
     )
     grid_resolution: int = Field(32, ge=1, le=1024, description="Grid cells along the longest axis [-].")
     transmittance_cutoff: float = Field(
-        1e-4, gt=0, lt=1,
+        1e-4,
+        gt=0,
+        lt=1,
         description="Long beams and queries end where the largest channel transmittance falls below this [-].",
     )
-    camera_unwarp: bool = Field(False, description="Remove camera-side OPL from tau (never compare such frames with mitransient) [-].")
-    snapshot_every: int = Field(
-        8, ge=0, description="Keep the steady average every k iterations for error-against-time curves (0: never) [-].",
+    camera_unwarp: bool = Field(
+        False, description="Remove camera-side OPL from tau (never compare such frames with mitransient) [-]."
     )
-    frame_mode: Optional[Literal["steady", "bins", "gate"]] = Field(
+    snapshot_every: int = Field(
+        8,
+        ge=0,
+        description="Keep the steady average every k iterations for error-against-time curves (0: never) [-].",
+    )
+    frame_mode: Literal["steady", "bins", "gate"] | None = Field(
         None, description="Overrides the film's frame_mode when set [-]."
     )
     checkpoint_every_iterations: int = Field(
-        0, ge=0,
+        0,
+        ge=0,
         description="Save the accumulated render (double sums, counters, snapshots) to runs/<name>/.render.checkpoint/ "
         "every k iterations, so that `pipeline run --resume` continues an interrupted render with the same bits "
         "(0: never) [-].",
     )
-    checkpoint_every_s: Optional[float] = Field(
-        None, gt=0, description="Also save a checkpoint when this much wall time has passed since the last one (null: "
-        "never) [s].",
+    checkpoint_every_s: float | None = Field(
+        None,
+        gt=0,
+        description="Also save a checkpoint when this much wall time has passed since the last one (null: never) [s].",
     )
-    memory_budget_gib: Optional[float] = Field(
-        8.0, gt=0,
+    memory_budget_gib: float | None = Field(
+        8.0,
+        gt=0,
         description="Refuse, before allocating, a render whose image buffers exceed this. They take 20 bytes per value "
         "of (3 + temporal_bins) x height x width x 3 (double sums and per-iteration buffers, float32 results; 8 more "
         "with checkpoints or a resume) plus 12 bytes per pixel for each kept snapshot. The film is refused, not "
@@ -114,7 +140,7 @@ class PTPBConfig(StrictModel):
     )
 
     @model_validator(mode="after")
-    def _budget(self) -> "PTPBConfig":
+    def _budget(self) -> PTPBConfig:
         if self.time_budget_s is None and self.iterations < 1:
             raise ValueError("render.iterations must be >= 1 when no time_budget_s is given")
         return self

@@ -4,9 +4,10 @@ Conventions (ptpb.md §1): metres, z up, x east, y north; time is optical path l
 light units are Mitsuba's (irradiance W m-2, radiance W m-2 sr-1, intensity W sr-1). Key paths are
 scene.<field> and reference.<field>.
 """
+
 from __future__ import annotations
 
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Literal
 
 from pydantic import BeforeValidator, Field, NonNegativeFloat, model_validator
 
@@ -33,10 +34,15 @@ class CameraConfig(StrictModel):
         "from view_azimuth_deg/view_elevation_deg at the distance that fits it in the frame [-].",
     )
     origin: Vec3 = Field((0.0, -5.0, 2.0), description="Pinhole position for placement look_at [m].")
-    target: Vec3 = Field((0.0, 0.0, 0.0), description="Point the optical axis passes through, for placement look_at [m].")
+    target: Vec3 = Field(
+        (0.0, 0.0, 0.0), description="Point the optical axis passes through, for placement look_at [m]."
+    )
     up: Vec3 = Field((0.0, 0.0, 1.0), description="World direction that appears up in the image [-].")
     view_azimuth_deg: float = Field(
-        200.0, ge=-360, le=360, description="frame_objects: direction from the target to the camera, clockwise from north [deg]."
+        200.0,
+        ge=-360,
+        le=360,
+        description="frame_objects: direction from the target to the camera, clockwise from north [deg].",
     )
     view_elevation_deg: float = Field(
         35.0, gt=-89, lt=89, description="frame_objects: elevation of the camera above the target [deg]."
@@ -50,7 +56,9 @@ class CameraConfig(StrictModel):
     )
     width: int = Field(96, ge=1, le=16384, description="Image width [px].")
     height: int = Field(64, ge=1, le=16384, description="Image height [px].")
-    medium: Optional[str] = Field(None, description="Medium id the pinhole sits in (a key of scene.media); null = air [-].")
+    medium: str | None = Field(
+        None, description="Medium id the pinhole sits in (a key of scene.media); null = air [-]."
+    )
 
 
 class SunConfig(StrictModel):
@@ -64,11 +72,13 @@ class SunConfig(StrictModel):
     )
     elevation_deg: float = Field(45.0, gt=0, le=90, description="Sun elevation above the horizon [deg].")
     azimuth_deg: float = Field(45.0, ge=-360, le=360, description="Sun azimuth clockwise from north (90 = east) [deg].")
-    direction: Optional[Vec3] = Field(
+    direction: Vec3 | None = Field(
         None, description="Explicit vector towards the sun (normalised); overrides elevation_deg/azimuth_deg [-]."
     )
-    solar_time_h: Optional[float] = Field(
-        None, ge=0, le=24,
+    solar_time_h: float | None = Field(
+        None,
+        ge=0,
+        le=24,
         description="Local solar time on the last grown day at the geometry's latitude (12 = noon); overrides "
         "elevation_deg/azimuth_deg with the site's sun path [h].",
     )
@@ -76,12 +86,15 @@ class SunConfig(StrictModel):
     irradiance: RGB = Field(
         (1000.0, 1000.0, 1000.0), description="Irradiance on a plane facing the sun, per channel [W m-2]."
     )
-    reference_point: Optional[Vec3] = Field(
-        None, description="Pins the sun's tau = 0 plane to this point; null = nearest point of the scene bounding "
+    reference_point: Vec3 | None = Field(
+        None,
+        description="Pins the sun's tau = 0 plane to this point; null = nearest point of the scene bounding "
         "sphere (ptpb.md §1) [m].",
     )
     disk_distance_radii: float = Field(
-        1000.0, ge=10, le=1e5,
+        1000.0,
+        ge=10,
+        le=1e5,
         description="Mitsuba export only: distance of the emitting disk in scene bounding radii; its wavefront "
         "curvature error is ~R_s / (2 x this) of OPL [-].",
     )
@@ -104,7 +117,7 @@ class AreaLightConfig(StrictModel):
     radiance: RGB = Field((20.0, 20.0, 20.0), description="Emitted radiance on the normal's side [W m-2 sr-1].")
 
     @model_validator(mode="after")
-    def _positive_size(self) -> "AreaLightConfig":
+    def _positive_size(self) -> AreaLightConfig:
         if min(self.size) <= 0:
             raise ValueError(f"size must be two positive lengths in m, got {self.size}")
         if sum(c * c for c in self.normal) == 0:
@@ -121,7 +134,7 @@ class PulseLightConfig(StrictModel):
     intensity: RGB = Field((10.0, 10.0, 10.0), description="Radiant intensity [W sr-1].")
     cutoff_angle_deg: float = Field(20.0, gt=0, le=90, description="spot: half-angle where emission stops [deg].")
     beam_width_deg: float = Field(15.0, gt=0, le=90, description="spot: half-angle of full intensity [deg].")
-    medium: Optional[str] = Field(None, description="Medium id the light sits in; null = air [-].")
+    medium: str | None = Field(None, description="Medium id the light sits in; null = air [-].")
 
 
 class PhysicalOpticsConfig(StrictModel):
@@ -129,18 +142,20 @@ class PhysicalOpticsConfig(StrictModel):
 
     kind: Literal["snow", "bubbly_ice", "clear_ice"] = Field("snow", description="Material model [-].")
     density: float = Field(550.0, gt=0, le=917, description="Bulk density (snow, bubbly ice) [kg m-3].")
-    ssa: Optional[float] = Field(None, gt=0, le=200, description="snow: specific surface area [m2 kg-1].")
-    optical_radius: Optional[float] = Field(None, gt=0, le=0.05, description="snow: optical radius, instead of ssa [m].")
-    bubble_radius: Optional[float] = Field(None, gt=0, le=0.05, description="bubbly_ice: bubble radius r_b [m].")
+    ssa: float | None = Field(None, gt=0, le=200, description="snow: specific surface area [m2 kg-1].")
+    optical_radius: float | None = Field(None, gt=0, le=0.05, description="snow: optical radius, instead of ssa [m].")
+    bubble_radius: float | None = Field(None, gt=0, le=0.05, description="bubbly_ice: bubble radius r_b [m].")
     absorption_enhancement: float = Field(1.6, gt=0, le=5, description="snow: absorption enhancement B [-].")
-    g0_natural: float = Field(0.86, gt=0, lt=1, description="snow: TARTES g0 at n = 1.3 (0.86 natural, 0.89 spheres) [-].")
+    g0_natural: float = Field(
+        0.86, gt=0, lt=1, description="snow: TARTES g0 at n = 1.3 (0.86 natural, 0.89 spheres) [-]."
+    )
     g: float = Field(0.86, gt=-1, lt=1, description="bubbly/clear ice: HG mean cosine of the bubbles [-].")
     black_carbon_ng_per_g: float = Field(0.0, ge=0, le=1e5, description="Black-carbon mass mixing ratio [ng g-1].")
     dust_ug_per_g: float = Field(0.0, ge=0, le=1e5, description="Mineral-dust mass mixing ratio [ug g-1].")
     haze_sigma_s: float = Field(0.0, ge=0, le=10, description="clear_ice: faint grey scattering [m-1].")
 
     @model_validator(mode="after")
-    def _inputs_for_kind(self) -> "PhysicalOpticsConfig":
+    def _inputs_for_kind(self) -> PhysicalOpticsConfig:
         if self.kind == "snow":
             if (self.ssa is None) == (self.optical_radius is None):
                 raise ValueError("snow needs exactly one of ssa [m2/kg] or optical_radius [m]")
@@ -157,33 +172,36 @@ class CoefficientsConfig(StrictModel):
     sigma_s: RGB = Field(..., description="Scattering coefficient per channel [m-1].")
     sigma_a: RGB = Field(..., description="Absorption coefficient per channel [m-1].")
     g: float = Field(0.0, gt=-1, lt=1, description="Henyey-Greenstein mean cosine [-].")
-    ior: float = Field(1.31, ge=1, le=4, description="Material refractive index, used when the boundary is dielectric [-].")
+    ior: float = Field(
+        1.31, ge=1, le=4, description="Material refractive index, used when the boundary is dielectric [-]."
+    )
 
 
 class MediumConfig(StrictModel):
     """One homogeneous medium: exactly one of preset, physical or coefficients (key path scene.media.<id>)."""
 
-    preset: Optional[str] = Field(
-        None, description="Optical preset in configs/presets/optics/ (fresh_snow, aged_snow, penitente_firn, dense_firn, "
+    preset: str | None = Field(
+        None,
+        description="Optical preset in configs/presets/optics/ (fresh_snow, aged_snow, penitente_firn, dense_firn, "
         "bubbly_ice, clear_ice, thesis_set_1..6) [-].",
     )
-    physical: Optional[PhysicalOpticsConfig] = Field(None, description="Derive from physical inputs [-].")
-    coefficients: Optional[CoefficientsConfig] = Field(None, description="Explicit sigma_s, sigma_a, g [-].")
-    form: Optional[Literal["full", "diffraction_removed", "isotropic_reduced"]] = Field(
+    physical: PhysicalOpticsConfig | None = Field(None, description="Derive from physical inputs [-].")
+    coefficients: CoefficientsConfig | None = Field(None, description="Explicit sigma_s, sigma_a, g [-].")
+    form: Literal["full", "diffraction_removed", "isotropic_reduced"] | None = Field(
         None,
         description="Phase-function form (snow_optics.md §4); null = diffraction_removed for snow and bubbly ice, "
         "full for clear ice, thesis sets and explicit coefficients [-].",
     )
-    boundary: Optional[Literal["null", "dielectric"]] = Field(
+    boundary: Literal["null", "dielectric"] | None = Field(
         None, description="null: index matched; dielectric: smooth Fresnel interface; null = the preset's own [-]."
     )
-    ior: Optional[float] = Field(None, ge=1, le=4, description="Overrides the material refractive index [-].")
-    metres_per_unit: Optional[float] = Field(
+    ior: float | None = Field(None, ge=1, le=4, description="Overrides the material refractive index [-].")
+    metres_per_unit: float | None = Field(
         None, gt=0, description="Thesis sets: metres per thesis scene unit; coefficients are divided by it [m]."
     )
 
     @model_validator(mode="after")
-    def _one_source(self) -> "MediumConfig":
+    def _one_source(self) -> MediumConfig:
         given = [k for k in ("preset", "physical", "coefficients") if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(f"give exactly one of preset, physical or coefficients (got {given or 'none'})")
@@ -195,23 +213,28 @@ class ObjectConfig(StrictModel):
 
     name: str = Field(..., pattern=r"^[A-Za-z0-9_-]+$", description="Object id, also the PLY file name [-].")
     shape: Literal["penitentes", "snowpack", "box", "sphere", "slab", "ply"] = Field(
-        ..., description="penitentes: the geometry stage's mesh; snowpack: a slab around (or, alone, under) it; "
+        ...,
+        description="penitentes: the geometry stage's mesh; snowpack: a slab around (or, alone, under) it; "
         "box/sphere/slab: test shapes; ply: any closed PLY [-].",
     )
-    medium: Optional[str] = Field(None, description="Medium id inside (a key of scene.media) [-].")
-    reflectance: Optional[RGB] = Field(None, description="Diffuse reflectance, for an opaque surface instead [-].")
+    medium: str | None = Field(None, description="Medium id inside (a key of scene.media) [-].")
+    reflectance: RGB | None = Field(None, description="Diffuse reflectance, for an opaque surface instead [-].")
     center: Vec3 = Field((0.0, 0.0, 0.0), description="box/sphere centre; slab: x, y of its centre [m].")
     size: Vec3 = Field((1.0, 1.0, 1.0), description="box: edge lengths; slab: x and y extents (z ignored) [m].")
     radius: float = Field(0.5, gt=0, description="sphere radius [m].")
     subdivisions: int = Field(4, ge=0, le=7, description="sphere: icosahedron subdivisions [-].")
-    top_z: Optional[float] = Field(None, description="slab/snowpack: height of the top face; null = automatic [m].")
+    top_z: float | None = Field(None, description="slab/snowpack: height of the top face; null = automatic [m].")
     thickness: float = Field(1.5, gt=0, description="slab/snowpack: thickness [m].")
     margin: float = Field(4.0, ge=0, description="snowpack: width of snow around the penitente footprint [m].")
-    gap: float = Field(0.002, ge=0, le=0.1, description="snowpack: air gap to the penitente mesh, avoids coincident faces [m].")
-    path: Optional[str] = Field(None, description="ply: mesh file (absolute, or relative to the working directory) [path].")
+    gap: float = Field(
+        0.002, ge=0, le=0.1, description="snowpack: air gap to the penitente mesh, avoids coincident faces [m]."
+    )
+    path: str | None = Field(
+        None, description="ply: mesh file (absolute, or relative to the working directory) [path]."
+    )
 
     @model_validator(mode="after")
-    def _medium_or_surface(self) -> "ObjectConfig":
+    def _medium_or_surface(self) -> ObjectConfig:
         if (self.medium is None) == (self.reflectance is None):
             raise ValueError(f"object '{self.name}' needs exactly one of medium or reflectance")
         if self.shape == "ply" and not self.path:
@@ -237,8 +260,9 @@ class FilmConfig(StrictModel):
         "arrivals of single-scattered light at the scene's surfaces plus window_tail_opl [-].",
     )
     window_tail_opl: float = Field(
-        1.0, ge=0, description="auto window: OPL kept after the latest direct arrival, for light that lingers in the "
-        "media [m].",
+        1.0,
+        ge=0,
+        description="auto window: OPL kept after the latest direct arrival, for light that lingers in the media [m].",
     )
 
     @property
@@ -251,8 +275,10 @@ def _default_media() -> dict[str, MediumConfig]:
 
 
 def _default_objects() -> list[ObjectConfig]:
-    return [ObjectConfig(name="penitentes", shape="penitentes", medium="snow"),
-            ObjectConfig(name="snowpack", shape="snowpack", medium="snow")]
+    return [
+        ObjectConfig(name="penitentes", shape="penitentes", medium="snow"),
+        ObjectConfig(name="snowpack", shape="snowpack", medium="snow"),
+    ]
 
 
 class SceneConfig(StrictModel):
@@ -267,19 +293,24 @@ class SceneConfig(StrictModel):
     objects: list[ObjectConfig] = Field(default_factory=_default_objects, description="Closed meshes [-].")
     film: FilmConfig = Field(default_factory=FilmConfig, description="Film and time axis [-].")
     max_depth: int = Field(
-        -1, ge=-1, le=100000,
+        -1,
+        ge=-1,
+        le=100000,
         description="Mitsuba's meaning: non-null interactions on the path plus one; -1 = unbounded [-].",
     )
     rr_depth: int = Field(8, ge=1, le=100000, description="Depth from which Russian roulette starts [-].")
 
     @model_validator(mode="after")
-    def _references_exist(self) -> "SceneConfig":
+    def _references_exist(self) -> SceneConfig:
         for i, obj in enumerate(self.objects):
             if obj.medium is not None and obj.medium not in self.media:
-                raise ValueError(f"objects[{i}] ('{obj.name}') names medium '{obj.medium}', which is not a key of "
-                                 f"scene.media ({', '.join(self.media) or 'none defined'})")
+                raise ValueError(
+                    f"objects[{i}] ('{obj.name}') names medium '{obj.medium}', which is not a key of "
+                    f"scene.media ({', '.join(self.media) or 'none defined'})"
+                )
         for who, medium in [("camera", self.camera.medium)] + [
-                (f"pulse_lights[{i}]", p.medium) for i, p in enumerate(self.pulse_lights)]:
+            (f"pulse_lights[{i}]", p.medium) for i, p in enumerate(self.pulse_lights)
+        ]:
             if medium is not None and medium not in self.media:
                 raise ValueError(f"{who}.medium '{medium}' is not a key of scene.media")
         names = [o.name for o in self.objects]
@@ -296,27 +327,46 @@ class ReferenceConfig(StrictModel):
     """Mitsuba 3 / mitransient reference renders (key path reference.<field>)."""
 
     steady: bool = Field(True, description="Render the steady reference with volpath [-].")
-    transient: bool = Field(True, description="Render the transient reference with mitransient (needs scene.film.mode transient) [-].")
-    spp: int = Field(64, ge=1, le=2**24, description="Samples per pixel of the steady reference (unless time_budget_s) [-].")
-    transient_spp: Optional[int] = Field(
+    transient: bool = Field(
+        True, description="Render the transient reference with mitransient (needs scene.film.mode transient) [-]."
+    )
+    spp: int = Field(
+        64, ge=1, le=2**24, description="Samples per pixel of the steady reference (unless time_budget_s) [-]."
+    )
+    transient_spp: int | None = Field(
         None, ge=1, le=2**24, description="Samples per pixel of the transient reference; null = spp [-]."
     )
     spp_per_pass: int = Field(
         16, ge=1, le=2**20, description="Each pass renders this many spp with its own seed; passes are averaged [-]."
     )
-    time_budget_s: Optional[float] = Field(
-        None, gt=0, description="Wall-clock budget per reference; overrides spp, stopping after the pass that "
+    time_budget_s: float | None = Field(
+        None,
+        gt=0,
+        description="Wall-clock budget per reference; overrides spp, stopping after the pass that "
         "would overrun it [s].",
     )
     variant: Literal["llvm_ad_rgb", "scalar_rgb"] = Field(
-        "llvm_ad_rgb", description="Preferred Mitsuba variant; falls back to scalar_rgb with a warning (steady only) [-]."
+        "llvm_ad_rgb",
+        description="Preferred Mitsuba variant; falls back to scalar_rgb with a warning (steady only) [-].",
     )
     force: bool = Field(
-        False, description="Render even when a delta light shines through a smooth dielectric (the medium renders "
+        False,
+        description="Render even when a delta light shines through a smooth dielectric (the medium renders "
         "black in Mitsuba) [-].",
     )
 
 
-__all__ = ["SceneConfig", "ReferenceConfig", "CameraConfig", "SunConfig", "SkyConfig", "AreaLightConfig",
-           "PulseLightConfig", "PhysicalOpticsConfig", "CoefficientsConfig", "MediumConfig", "ObjectConfig",
-           "FilmConfig"]
+__all__ = [
+    "SceneConfig",
+    "ReferenceConfig",
+    "CameraConfig",
+    "SunConfig",
+    "SkyConfig",
+    "AreaLightConfig",
+    "PulseLightConfig",
+    "PhysicalOpticsConfig",
+    "CoefficientsConfig",
+    "MediumConfig",
+    "ObjectConfig",
+    "FilmConfig",
+]

@@ -1,5 +1,6 @@
 """Compositing: exposure keeps brightness order, videos decode with the right size and count,
 and the error metrics match hand-computed values."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +18,7 @@ def pulse_frames(t_count=12, height=20, width=30, seed=0):
     rng = np.random.default_rng(seed)
     frames = 0.01 * rng.random((t_count, height, width, 3), dtype=np.float32)
     for k in range(t_count):
-        frames[k, height // 2 - 2: height // 2 + 2, 2 * k: 2 * k + 3] += np.array([1.0, 0.8, 0.6], dtype=np.float32)
+        frames[k, height // 2 - 2 : height // 2 + 2, 2 * k : 2 * k + 3] += np.array([1.0, 0.8, 0.6], dtype=np.float32)
     return frames
 
 

@@ -1,4 +1,5 @@
 """The Embree ray engine against analytic answers and an exact float64 reference."""
+
 from __future__ import annotations
 
 import threading

@@ -1,4 +1,5 @@
 """The run report opens in headless Chromium with every image and video loading."""
+
 from __future__ import annotations
 
 import re
@@ -19,16 +20,22 @@ def chromium_dom(page, screenshot=None) -> str:
     # --run-all-compositor-stages-before-draw hangs with <video> elements here; keep flags minimal.
     args = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=5000"]
     if screenshot is not None:
-        subprocess.run(args + ["--window-size=1280,1600", f"--screenshot={screenshot}", page.as_uri()],
-                       capture_output=True, timeout=60, check=True)
-    result = subprocess.run(args + ["--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=60, check=True)
+        subprocess.run(
+            args + ["--window-size=1280,1600", f"--screenshot={screenshot}", page.as_uri()],
+            capture_output=True,
+            timeout=60,
+            check=True,
+        )
+    result = subprocess.run(
+        args + ["--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=60, check=True
+    )
     return result.stdout
 
 
 def make_run(root):
     frames = np.zeros((6, 16, 16, 3), dtype=np.float32)
     for k in range(6):
-        frames[k, 8, 2 * k: 2 * k + 3] = 1.0
+        frames[k, 8, 2 * k : 2 * k + 3] = 1.0
     composite = root / "composite"
     composite.mkdir(parents=True)
     cfg = CompositeConfig(video_min_height=64)
@@ -43,7 +50,9 @@ def test_markdown_tables_become_html():
     assert "<th>a</th>" in html_text and "<td>2</td>" in html_text and "<p>Title</p>" in html_text
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (Debian package 'chromium'); `make setup` installs it")
+@pytest.mark.skipif(
+    CHROMIUM is None, reason="Chromium is not installed (Debian package 'chromium'); `make setup` installs it"
+)
 def test_report_opens_in_chromium_without_missing_media(tmp_path):
     make_run(tmp_path / "run")
     report = write_report(tmp_path / "run" / "compare" / "report.html", tmp_path / "run", ["composite"], "test run")

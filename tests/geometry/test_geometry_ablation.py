@@ -1,6 +1,7 @@
 """Recession terms of the growth loop (penitentes.md 3.8, 3.9, 6.1): the upwinded direct beam, the
 loss to the sky, the flux-time clock of the linear terms (lambda* = 4 pi D / A_B in a full run), and
 the Lliboutry switch integrated over the wall faces a column stands for."""
+
 from pathlib import Path
 
 import numpy as np
@@ -49,8 +50,10 @@ def test_flat_ice_keeps_the_absorbed_shortwave_above_the_sky_loss():
     settings = ablation.settings_from_config(cfg)
     grown = ablation.grow_field(np.zeros((16, 16)), cfg.spacing, settings, np.random.default_rng(0))
     sun = sunpath.daily_sun_positions(cfg.latitude, cfg.start_day_of_year, cfg.sun_positions_per_day)
-    incident = sum(d * (settings.sky.direct_normal(e) * np.sin(e) + settings.sky.diffuse_horizontal(e))
-                   for d, e in zip(sun.durations, sun.elevations))
+    incident = sum(
+        d * (settings.sky.direct_normal(e) * np.sin(e) + settings.sky.diffuse_horizontal(e))
+        for d, e in zip(sun.durations, sun.elevations)
+    )
     net = (1 - cfg.albedo) * incident - cfg.sky_loss * sunpath.SECONDS_PER_DAY
     expected = cfg.ablation_efficiency * net / (cfg.density * ablation.LATENT_HEAT_SUBLIMATION)
     np.testing.assert_allclose(-grown.height, expected, rtol=1e-9)
@@ -61,7 +64,9 @@ def test_lab_preset_grows_at_lambda_star():
     """A and D both run on flux time, so a full sun-path run selects lambda* = 4 pi D / A_B (4.4 cm)."""
     cfg = GeometryConfig(**yaml.safe_load((SITES / "lab_micro.yaml").read_text())["geometry"])
     rng = np.random.default_rng(1)
-    h0 = ablation.initial_height_field(cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
+    h0 = ablation.initial_height_field(
+        cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
+    )
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     lambda_star = 4 * np.pi * cfg.diffusivity / cfg.scattered_light_coefficient
     assert metrics.dominant_wavelength(grown.height, cfg.spacing) == pytest.approx(lambda_star, rel=0.15)
@@ -77,12 +82,16 @@ def test_uniform_latent_heat_leaves_the_recession_as_it_was():
     sun = _sun(40.0, 110.0)
     inverse_heat = np.full_like(h, 1.0 / ablation.LATENT_HEAT_SUBLIMATION)
     p, q = ablation.sunward_slopes(h, spacing, sun, 85.0)
-    np.testing.assert_allclose(ablation.direct_beam_mass(p, q, sun, inverse_heat),
-                               ablation.direct_beam_lowering(p, q, sun) * inverse_heat, rtol=1e-12)
+    np.testing.assert_allclose(
+        ablation.direct_beam_mass(p, q, sun, inverse_heat),
+        ablation.direct_beam_lowering(p, q, sun) * inverse_heat,
+        rtol=1e-12,
+    )
     dx_back, dx_fwd = (h - np.roll(h, 1, 1)) / spacing, (np.roll(h, -1, 1) - h) / spacing
     dy_back, dy_fwd = (h - np.roll(h, 1, 0)) / spacing, (np.roll(h, -1, 0) - h) / spacing
-    grad2 = (np.maximum(np.maximum(dx_back, 0) ** 2, np.minimum(dx_fwd, 0) ** 2)
-             + np.maximum(np.maximum(dy_back, 0) ** 2, np.minimum(dy_fwd, 0) ** 2))
+    grad2 = np.maximum(np.maximum(dx_back, 0) ** 2, np.minimum(dx_fwd, 0) ** 2) + np.maximum(
+        np.maximum(dy_back, 0) ** 2, np.minimum(dy_fwd, 0) ** 2
+    )
     surface, _ = ablation.surface_inverse_latent_heat(h, spacing, inverse_heat, 89.0)
     np.testing.assert_allclose(surface, inverse_heat * np.sqrt(1 + grad2), rtol=1e-12)
 
@@ -107,8 +116,15 @@ def test_thin_north_south_walls_fall_and_east_west_walls_stand():
     """Cathles et al. 2014 / Warren 2023 on a grid of square pits (0.8 m deep, 0.81 m apart) walled by
     one-cell walls both ways, Tapado for 8 days from 25 Nov: the morning and evening sun on the N-S
     walls' faces brings them down to the floor while the E-W walls keep and gain their height."""
-    cfg = GeometryConfig(**{**load_raw(SITES / "tapado.yaml")["geometry"],
-                            "grid_cells": 64, "domain_size": 4.0, "days": 8, "snapshots": 2})
+    cfg = GeometryConfig(
+        **{
+            **load_raw(SITES / "tapado.yaml")["geometry"],
+            "grid_cells": 64,
+            "domain_size": 4.0,
+            "days": 8,
+            "snapshots": 2,
+        }
+    )
     n, period = cfg.grid_cells, 13
     h = np.full((n, n), -0.8)
     h[::period, :] = 0.0  # E-W walls

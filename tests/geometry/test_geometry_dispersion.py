@@ -5,6 +5,7 @@ The 1-D run uses the real-space quadrature (not the spectral shortcut), so it te
 Reduced grids: 256 cells over 8 lambda* (1-D) and 128^2 over 16 lambda* (2-D); the physics is linear
 and scale-free at these amplitudes, so nothing is lost.
 """
+
 import numpy as np
 import pytest
 
@@ -62,7 +63,7 @@ def test_growth_rates_fit_dispersion_relation_and_lambda_star():
     k = 2 * np.pi * modes / length
     expected = ablation.linear_growth_rate(k, A_B, D)
     assert np.all(np.abs(measured - expected) <= 0.05 * SIGMA_STAR), (measured / SIGMA_STAR, expected / SIGMA_STAR)
-    fitted_a, fitted_d = np.linalg.lstsq(np.column_stack((k, -k**2)), measured, rcond=None)[0]
+    fitted_a, fitted_d = np.linalg.lstsq(np.column_stack((k, -(k**2))), measured, rcond=None)[0]
     fitted_lambda = 4 * np.pi * fitted_d / fitted_a
     assert abs(fitted_lambda / LAMBDA_STAR - 1) < 0.10, fitted_lambda
     assert abs(fitted_a**2 / (4 * fitted_d) / SIGMA_STAR - 1) < 0.10

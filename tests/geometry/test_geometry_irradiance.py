@@ -3,6 +3,7 @@
 The bowl uses D_c / spacing = 64 (not 128) to stay fast; V_sky is within 1 % there and the
 scattered irradiance within 5 % (the issue's tolerance).
 """
+
 import numpy as np
 import pytest
 

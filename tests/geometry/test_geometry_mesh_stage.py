@@ -1,6 +1,7 @@
 """Mesh (watertight, volume = height integral, PLY round trip), config errors, site presets, and
 the stage's outputs. The stage test uses the demo grid (GeometryConfig defaults) for 4 days so the
 mesh checked is the demo's size and kind; the full 40-day demo runs in the slow test."""
+
 from pathlib import Path
 
 import av
@@ -66,8 +67,15 @@ def test_site_presets_validate(preset):
 def test_stage_writes_every_output(tmp_path):
     cfg = GeometryConfig(days=4, snapshots=4)
     summary = run_geometry_stage(cfg, tmp_path, seed=5, quiet=True)
-    for name in ("heightfield.npz", "penitentes.ply", "metrics.json", "metrics.png", "preview.png",
-                 "hillshade.png", "timelapse.mp4"):
+    for name in (
+        "heightfield.npz",
+        "penitentes.ply",
+        "metrics.json",
+        "metrics.png",
+        "preview.png",
+        "hillshade.png",
+        "timelapse.mp4",
+    ):
         assert (tmp_path / name).stat().st_size > 1000, name
     solid = mesh.read_ply(tmp_path / "penitentes.ply")
     data = np.load(tmp_path / "heightfield.npz")
@@ -83,6 +91,7 @@ def test_stage_writes_every_output(tmp_path):
     assert summary["triangles"] == len(solid.faces)
     # V4: any relief darkens the field against flat snow of the same local albedo.
     import json
+
     m = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
     assert m["field_albedo"] < m["flat_albedo"]
     assert m["albedo_difference"] == pytest.approx(m["field_albedo"] - cfg.albedo)

@@ -4,6 +4,7 @@ ice), full diurnal sun path with 12 positions per day; the control is the 65 S p
 setting moved to 65 S). The rows here are 0.5-0.7 m apart crest to crest, so 4 m holds 6-8 of them:
 enough for orientation, lean, the latitude null and a north-south spectral peak.
 """
+
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,9 @@ REDUCED = dict(grid_cells=64, domain_size=4.0)
 def _grow(preset: str):
     cfg = GeometryConfig(**{**load_raw(SITES / preset)["geometry"], **REDUCED})
     rng = np.random.default_rng(7)
-    h0 = ablation.initial_height_field(cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
+    h0 = ablation.initial_height_field(
+        cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
+    )
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     return cfg, h0, grown
 

@@ -1,4 +1,5 @@
 """V0 sun-path checks (penitentes.md 3.2 and 7) against closed-form values."""
+
 import numpy as np
 import pytest
 
@@ -31,7 +32,9 @@ def test_reference_example_30s_solstice():
 def test_daily_positions_cover_daylight_and_stay_up():
     sun = sunpath.daily_sun_positions(-30.1, 355, 12)
     assert np.all(sun.vectors[:, 2] > 0)
-    assert sun.durations.sum() / 3600 == pytest.approx(2 * np.degrees(sunpath.daylight_half_angle(-30.1, sun.declination)) / 15)
+    assert sun.durations.sum() / 3600 == pytest.approx(
+        2 * np.degrees(sunpath.daylight_half_angle(-30.1, sun.declination)) / 15
+    )
     assert np.allclose(sun.vectors[:, 0], -sun.vectors[::-1, 0])  # morning and afternoon mirror
     assert sunpath.daily_sun_positions(-80.0, 172, 12).vectors.shape[0] == 0  # polar night
 

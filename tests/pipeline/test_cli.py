@@ -1,4 +1,5 @@
 """The CLI end to end on a tiny real config: validate, run, skip when nothing changed, re-run on a change."""
+
 from __future__ import annotations
 
 import json
@@ -9,7 +10,9 @@ import pytest
 
 
 def cli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "pipeline", *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "pipeline", *args], cwd=cwd, capture_output=True, text=True, timeout=300
+    )
 
 
 @pytest.fixture

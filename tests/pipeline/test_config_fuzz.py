@@ -5,6 +5,7 @@ Two kinds of documents: arbitrary keys and values at the top level, and a comple
 with one to three hostile edits deep inside it (NaN, infinities, huge or negative numbers, wrong
 types, deleted keys, unknown keys, whole sections replaced), whose errors must name the edited key.
 """
+
 from __future__ import annotations
 
 import copy
@@ -19,14 +20,23 @@ from pipeline.config import ConfigError, format_key_path, load_config, validate
 
 KNOWN_KEYS = ["name", "seed", "threads", "runs_dir", "geometry", "scene", "reference", "render", "composite"]
 scalars = st.one_of(
-    st.none(), st.booleans(), st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_infinity=True),
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**6), 10**6),
+    st.floats(allow_nan=True, allow_infinity=True),
     st.text(max_size=12),
 )
-values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3), max_leaves=8)
+values = st.recursive(
+    scalars,
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3),
+    max_leaves=8,
+)
 documents = st.dictionaries(st.sampled_from(KNOWN_KEYS) | st.text(min_size=1, max_size=10), values, max_size=6)
 
 
-@settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(
+    max_examples=500, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(document=documents)
 def test_generated_configs_are_accepted_or_refused_with_a_key(tmp_path_factory, document):
     path = tmp_path_factory.mktemp("fuzz") / "point.yaml"
@@ -58,7 +68,9 @@ def test_arbitrary_text_never_escapes_as_anything_but_config_error(tmp_path_fact
 
 # A small valid run: a box of medium, every section present. Its full dump lists every key.
 BASE = {
-    "name": "fuzzed", "seed": 3, "threads": 2,
+    "name": "fuzzed",
+    "seed": 3,
+    "threads": 2,
     "scene": {
         "media": {"snow": {"coefficients": {"sigma_s": [3.0, 2.5, 2.0], "sigma_a": [0.3, 0.1, 0.05], "g": 0.2}}},
         "objects": [{"name": "block", "shape": "box", "medium": "snow", "center": [0, 0, -0.5], "size": [2, 2, 1]}],
@@ -67,8 +79,13 @@ BASE = {
         "pulse_lights": [{"kind": "spot"}],
         "film": {"temporal_bins": 12, "window": "manual", "start_opl": 3.0, "bin_width_opl": 0.1},
     },
-    "render": {"iterations": 12, "checkpoint_every_iterations": 4, "checkpoint_every_s": 60.0,
-               "time_budget_s": 100.0, "alpha": 0.8},
+    "render": {
+        "iterations": 12,
+        "checkpoint_every_iterations": 4,
+        "checkpoint_every_s": 60.0,
+        "time_budget_s": 100.0,
+        "alpha": 0.8,
+    },
 }
 FULL = validate(BASE).model_dump(mode="json")
 
@@ -86,12 +103,42 @@ def leaf_paths(node, prefix=()):
 
 LEAVES = sorted(leaf_paths(FULL), key=str)
 hostile_values = st.one_of(
-    st.sampled_from([math.nan, math.inf, -math.inf, -1, 0, -1e308, 1e308, 10**30, -(10**30), 2**63, "", "x" * 300,
-                     None, True, False, [], {}, [0] * 5, {"a": 1}, [math.nan] * 3, "1e400", "-.inf"]),
-    st.floats(allow_nan=True, allow_infinity=True), st.integers(-(10**20), 10**20), st.text(max_size=10),
+    st.sampled_from(
+        [
+            math.nan,
+            math.inf,
+            -math.inf,
+            -1,
+            0,
+            -1e308,
+            1e308,
+            10**30,
+            -(10**30),
+            2**63,
+            "",
+            "x" * 300,
+            None,
+            True,
+            False,
+            [],
+            {},
+            [0] * 5,
+            {"a": 1},
+            [math.nan] * 3,
+            "1e400",
+            "-.inf",
+        ]
+    ),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(-(10**20), 10**20),
+    st.text(max_size=10),
 )
-edits = st.tuples(st.sampled_from(LEAVES), st.sampled_from(["replace", "replace", "delete", "unknown key", "parent"]),
-                  hostile_values, st.text(min_size=1, max_size=8))
+edits = st.tuples(
+    st.sampled_from(LEAVES),
+    st.sampled_from(["replace", "replace", "delete", "unknown key", "parent"]),
+    hostile_values,
+    st.text(min_size=1, max_size=8),
+)
 
 
 def apply_edit(document: dict, path: tuple, op: str, value, key: str) -> tuple | None:
@@ -107,8 +154,12 @@ def apply_edit(document: dict, path: tuple, op: str, value, key: str) -> tuple |
         if not isinstance(node, (dict, list)):
             return None
     last = path[-1]
-    if isinstance(node, dict) and last not in node or isinstance(node, list) and not (
-            isinstance(last, int) and last < len(node)):
+    if (
+        isinstance(node, dict)
+        and last not in node
+        or isinstance(node, list)
+        and not (isinstance(last, int) and last < len(node))
+    ):
         return None
     if op == "delete":
         del node[last]
@@ -122,7 +173,9 @@ def apply_edit(document: dict, path: tuple, op: str, value, key: str) -> tuple |
     return path
 
 
-@settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(
+    max_examples=500, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(chosen=st.lists(edits, min_size=1, max_size=3))
 def test_hostile_edits_deep_in_a_valid_config_are_refused_naming_the_key(tmp_path_factory, chosen):
     document = copy.deepcopy(FULL)

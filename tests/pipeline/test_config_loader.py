@@ -1,4 +1,5 @@
 """Config loading: extends, overrides, and errors that name the file or key path."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -2,6 +2,7 @@
 folder is complete (its manifest's outputs hash as recorded) and a checkpoint, if any, is whole;
 the next run finishes with correct manifests, and a render resumed from a killed run's checkpoint
 has the bits of an uninterrupted one."""
+
 from __future__ import annotations
 
 import hashlib
@@ -14,8 +15,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from block_scene import block_config
+
 from pipeline.manifest import outputs_intact, read_manifest
 from pipeline.paths import PROJECT_ROOT
 
@@ -37,8 +38,9 @@ def assert_nothing_half_written(run: Path) -> list[str]:
         manifest = read_manifest(folder)
         assert manifest is not None, f"{folder} is visible without a readable manifest"
         assert outputs_intact(folder, manifest), f"{folder}: an output does not match its manifest"
-        assert set(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()) == \
-            set(manifest["outputs"]) | {"manifest.json"}, f"{folder} holds files its manifest does not list"
+        assert set(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()) == set(
+            manifest["outputs"]
+        ) | {"manifest.json"}, f"{folder} holds files its manifest does not list"
         complete.append(folder.name)
     checkpoint = run / ".render.checkpoint" / "checkpoint.npz"
     if checkpoint.exists():
@@ -54,8 +56,13 @@ def kill_and_check(config: Path, run: Path, kills: int, rng: random.Random, full
     seen: dict[str, int] = {}
     for k in range(kills):
         extra = ("--force", "--resume") if k % 2 else ("--force",)
-        process = subprocess.Popen(pipeline_command(config, *extra), cwd=config.parent, start_new_session=True,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        process = subprocess.Popen(
+            pipeline_command(config, *extra),
+            cwd=config.parent,
+            start_new_session=True,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         time.sleep(rng.uniform(0.2, full_run_s))
         in_flight = [p.name.split(".")[1] for p in run.glob(f".*.staging-{process.pid}")] if run.exists() else []
         os.killpg(process.pid, signal.SIGKILL)
@@ -72,22 +79,39 @@ def run_kill_test(tmp_path: Path, kills: int, seed: int) -> dict:
     config = tmp_path / "killed.yaml"
     # No reference, and a small render that saves a checkpoint after every iteration: a whole run
     # takes about 3 s on 2 cores, a third of it rendering.
-    config.write_text(block_config(
-        runs, name="killed", seed=3, reference={"steady": False, "transient": False},
-        render={"iterations": 24, "snapshot_every": 4, "light_paths_per_iteration": 6000,
-                "checkpoint_every_iterations": 1}))
+    config.write_text(
+        block_config(
+            runs,
+            name="killed",
+            seed=3,
+            reference={"steady": False, "transient": False},
+            render={
+                "iterations": 24,
+                "snapshot_every": 4,
+                "light_paths_per_iteration": 6000,
+                "checkpoint_every_iterations": 1,
+            },
+        )
+    )
     run = runs / "killed"
     t0 = time.perf_counter()
-    first = subprocess.run(pipeline_command(config), cwd=tmp_path, capture_output=True, text=True, timeout=300,
-                           env={**os.environ, "PYTHONPATH": str(PROJECT_ROOT)})
+    first = subprocess.run(
+        pipeline_command(config),
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(PROJECT_ROOT)},
+    )
     full_run_s = time.perf_counter() - t0
     assert first.returncode == 0, first.stderr
     uninterrupted = {name: sha256(run / "render" / name) for name in ("frames.npy", "steady.npy")}
 
     seen = kill_and_check(config, run, kills, random.Random(seed), full_run_s)
 
-    final = subprocess.run(pipeline_command(config, "--resume"), cwd=tmp_path, capture_output=True, text=True,
-                           timeout=300)
+    final = subprocess.run(
+        pipeline_command(config, "--resume"), cwd=tmp_path, capture_output=True, text=True, timeout=300
+    )
     assert final.returncode == 0, final.stderr
     assert assert_nothing_half_written(run) == sorted(STAGES)
     assert not list(run.glob(".*staging-*")) and not (run / ".render.checkpoint").exists()

@@ -1,30 +1,44 @@
 """The whole pipeline on a tiny scene: every stage runs, agrees with the physics it depends on, and a
 second run skips everything. A lit block of snow-like medium stands in for the penitente field so the
 test needs no geometry stage."""
+
 from __future__ import annotations
 
 import json
 
 import numpy as np
 import pytest
-
 from block_scene import block_config
+
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
 from render.video import probe_mp4
 
+
 @pytest.mark.mitsuba
 def test_every_stage_runs_and_agrees_with_the_reference(tmp_path):
     config_file = tmp_path / "tiny.yaml"
-    config_file.write_text(block_config(
-        tmp_path / "runs", name="tiny", seed=3, reference={"spp": 256, "transient_spp": 256, "spp_per_pass": 128},
-        render={"iterations": 12, "snapshot_every": 4, "light_paths_per_iteration": 6000}))
+    config_file.write_text(
+        block_config(
+            tmp_path / "runs",
+            name="tiny",
+            seed=3,
+            reference={"spp": 256, "transient_spp": 256, "spp_per_pass": 128},
+            render={"iterations": 12, "snapshot_every": 4, "light_paths_per_iteration": 6000},
+        )
+    )
     cfg = load_config(config_file)
     results = run_stages(cfg, STAGES, quiet=True)
     status = {r.name: r.status for r in results}
-    assert status == {"geometry": "disabled", "scene": "ran", "reference": "ran", "render": "ran",
-                      "composite": "ran", "compare": "ran"}
+    assert status == {
+        "geometry": "disabled",
+        "scene": "ran",
+        "reference": "ran",
+        "render": "ran",
+        "composite": "ran",
+        "compare": "ran",
+    }
     run = tmp_path / "runs" / "tiny"
     for stage in ("scene", "reference", "render", "composite", "compare"):
         manifest = json.loads((run / stage / "manifest.json").read_text())
@@ -54,4 +68,5 @@ def test_every_stage_runs_and_agrees_with_the_reference(tmp_path):
 
     again = run_stages(cfg, STAGES, quiet=True)
     assert {r.name: r.status for r in again if r.status != "disabled"} == {
-        s: "skipped" for s in ("scene", "reference", "render", "composite", "compare")}
+        s: "skipped" for s in ("scene", "reference", "render", "composite", "compare")
+    }

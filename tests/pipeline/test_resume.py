@@ -1,6 +1,7 @@
 """Resuming interrupted renders: the runner's checkpoint folder outlives the staging swap only under
 --resume, and `pipeline run --resume` after Ctrl-C continues the render to the bits of an
 uninterrupted one, or refuses a checkpoint of other settings with the setting that changed."""
+
 from __future__ import annotations
 
 import hashlib
@@ -12,8 +13,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from block_scene import block_config
+
 from pipeline.config import load_config
 from pipeline.runner import Stage, checkpoint_dir, run_stages
 
@@ -53,9 +54,26 @@ def test_checkpoint_folder_is_kept_only_for_resume_and_removed_once_published(co
 
 
 def cli(config: Path, *args: str, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline", "run", str(config), "--quiet", "--stage", "scene",
-                           "--stage", "render", *args], cwd=config.parent, capture_output=True, text=True, timeout=300,
-                          **kwargs)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipeline",
+            "run",
+            str(config),
+            "--quiet",
+            "--stage",
+            "scene",
+            "--stage",
+            "render",
+            *args,
+        ],
+        cwd=config.parent,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        **kwargs,
+    )
 
 
 def digest(path: Path) -> str:
@@ -64,16 +82,34 @@ def digest(path: Path) -> str:
 
 def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path):
     config = tmp_path / "resumed.yaml"
-    config.write_text(block_config(
-        tmp_path / "runs", name="resumed", seed=5, g=0.3, width=20, height=14, bins=10,
-        reference={"steady": False, "transient": False},
-        render={"iterations": 80, "snapshot_every": 10, "light_paths_per_iteration": 1000,
-                "checkpoint_every_iterations": 5, "frame_mode": "gate"}))
+    config.write_text(
+        block_config(
+            tmp_path / "runs",
+            name="resumed",
+            seed=5,
+            g=0.3,
+            width=20,
+            height=14,
+            bins=10,
+            reference={"steady": False, "transient": False},
+            render={
+                "iterations": 80,
+                "snapshot_every": 10,
+                "light_paths_per_iteration": 1000,
+                "checkpoint_every_iterations": 5,
+                "frame_mode": "gate",
+            },
+        )
+    )
     run = tmp_path / "runs" / "resumed"
     checkpoint = run / ".render.checkpoint" / "checkpoint.npz"
-    process = subprocess.Popen([sys.executable, "-m", "pipeline", "run", str(config), "--quiet", "--stage", "scene",
-                                "--stage", "render"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pipeline", "run", str(config), "--quiet", "--stage", "scene", "--stage", "render"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 120
     while not checkpoint.exists() and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -1,8 +1,8 @@
 """The stage runner: skipping, selective re-runs, manifests and the staging-folder swap."""
+
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 

@@ -1,5 +1,6 @@
 """Sweeps: sweep files are validated before anything runs, and the Snakemake workflow runs each point
 through the stage runner, does nothing the second time and re-runs only a changed point."""
+
 from __future__ import annotations
 
 import importlib.util
@@ -62,6 +63,7 @@ def sweep_error(tmp_path, text) -> str:
 
 # ---------------------------------------------------------------- validation, before anything runs
 
+
 def test_unknown_key_in_the_sweep_file_names_the_file_point_and_key(tmp_path, base):
     message = sweep_error(tmp_path, "base: base.yaml\npoints:\n  - name: a\n    sett: {seed: 2}\n")
     assert message.startswith(f"{tmp_path / 'bad.yaml'}: point 'a': sett: unknown key")
@@ -72,8 +74,10 @@ def test_unknown_key_in_the_sweep_file_names_the_file_point_and_key(tmp_path, ba
 
 def test_override_of_a_missing_config_key_names_the_point_and_key(tmp_path, base):
     message = sweep_error(tmp_path, "base: base.yaml\npoints:\n  - name: a\n    set: {render.iteratons: 4}\n")
-    assert message == (f"{tmp_path / 'bad.yaml'}: point 'a': render.iteratons: the base config has no key "
-                       "'iteratons' under render (did you mean 'iterations'?)")
+    assert message == (
+        f"{tmp_path / 'bad.yaml'}: point 'a': render.iteratons: the base config has no key "
+        "'iteratons' under render (did you mean 'iterations'?)"
+    )
     # A mistyped medium id would silently add a medium: it is an error too.
     message = sweep_error(tmp_path, "base: base.yaml\npoints:\n  - name: b\n    set: {scene.media.snw.preset: x}\n")
     assert "point 'b': scene.media.snw.preset: the base config has no key 'snw' under scene.media" in message
@@ -91,8 +95,12 @@ def test_invalid_value_and_duplicate_names(tmp_path, base):
 def test_grid_makes_every_combination(tmp_path, base):
     write(tmp_path / "grid.yaml", "base: base.yaml\ngrid:\n  seed: [1, 2]\n  render.iterations: {few: 2, many: 8}\n")
     sweep = load_sweep(tmp_path / "grid.yaml")
-    assert [p.name for p in sweep.points] == ["seed-1_iterations-few", "seed-1_iterations-many",
-                                               "seed-2_iterations-few", "seed-2_iterations-many"]
+    assert [p.name for p in sweep.points] == [
+        "seed-1_iterations-few",
+        "seed-1_iterations-many",
+        "seed-2_iterations-few",
+        "seed-2_iterations-many",
+    ]
     assert sweep.points[3].config.render.iterations == 8 and sweep.points[3].config.seed == 2
     assert sweep.points[0].config.name == "grid-seed-1_iterations-few"
 
@@ -127,13 +135,18 @@ def test_summary_of_points_with_missing_files_has_empty_cells(tmp_path, base, mo
 
 # ---------------------------------------------------------------- the workflow end to end
 
+
 def sweep_cli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "pipeline", "sweep", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "pipeline", "sweep", *args], cwd=cwd, capture_output=True, text=True, timeout=300
+    )
 
 
 def manifests(runs: Path) -> dict[str, tuple[int, str]]:
-    return {str(p.relative_to(runs)): (p.stat().st_mtime_ns, p.read_text()) for p in sorted(runs.glob("s-*/*/manifest.json"))}
+    return {
+        str(p.relative_to(runs)): (p.stat().st_mtime_ns, p.read_text())
+        for p in sorted(runs.glob("s-*/*/manifest.json"))
+    }
 
 
 @needs_snakemake
@@ -150,7 +163,8 @@ def test_sweep_runs_then_does_nothing_then_reruns_only_the_changed_point(tmp_pat
     assert "s-set1/compare/report.html" in (folder / "report.html").read_text()
     done = manifests(runs)
     assert {k for k in done if k.endswith("compare/manifest.json")} == {
-        f"s-{p}/compare/manifest.json" for p in ("set1", "set6", "firn")}
+        f"s-{p}/compare/manifest.json" for p in ("set1", "set6", "firn")
+    }
 
     second = sweep_cli(str(sweep_file), "--cores", "2", cwd=tmp_path)
     assert second.returncode == 0, second.stderr[-3000:]
@@ -163,15 +177,18 @@ def test_sweep_runs_then_does_nothing_then_reruns_only_the_changed_point(tmp_pat
     assert "wildcards: point=firn" in third.stdout + third.stderr
     assert "point=set1" not in third.stdout + third.stderr and "point=set6" not in third.stdout + third.stderr
     after = manifests(runs)
-    assert {k: v for k, v in after.items() if not k.startswith("s-firn/")} == \
-        {k: v for k, v in done.items() if not k.startswith("s-firn/")}
+    assert {k: v for k, v in after.items() if not k.startswith("s-firn/")} == {
+        k: v for k, v in done.items() if not k.startswith("s-firn/")
+    }
     assert after["s-firn/scene/manifest.json"] != done["s-firn/scene/manifest.json"]
     assert "fresh_snow" in (folder / "summary.csv").read_text()
 
 
 @needs_snakemake
-@pytest.mark.skipif(importlib.util.find_spec("snakemake_executor_plugin_slurm") is None,
-                    reason="snakemake-executor-plugin-slurm not installed")
+@pytest.mark.skipif(
+    importlib.util.find_spec("snakemake_executor_plugin_slurm") is None,
+    reason="snakemake-executor-plugin-slurm not installed",
+)
 def test_slurm_profile_dry_run_prints_the_jobs_it_would_submit(tmp_path, base):
     sweep_file = write(tmp_path / "s.yaml", TINY_SWEEP.format(runs=tmp_path / "runs", firn="penitente_firn"))
     result = sweep_cli(str(sweep_file), "--profile", "slurm", "-n", cwd=tmp_path)
@@ -184,8 +201,10 @@ def test_slurm_profile_dry_run_prints_the_jobs_it_would_submit(tmp_path, base):
 
 
 def test_cli_reports_sweep_errors_one_per_line(tmp_path, base):
-    write(tmp_path / "bad.yaml", "base: base.yaml\npoints:\n  - {name: a, set: {render.iteratons: 4}}\n"
-                                 "  - {name: b, set: {seed: -1}}\n")
+    write(
+        tmp_path / "bad.yaml",
+        "base: base.yaml\npoints:\n  - {name: a, set: {render.iteratons: 4}}\n  - {name: b, set: {seed: -1}}\n",
+    )
     result = sweep_cli("bad.yaml", cwd=tmp_path)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()

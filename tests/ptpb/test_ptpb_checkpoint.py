@@ -1,6 +1,7 @@
 """Checkpoints of the render stage: a render resumed from checkpoint.npz has the bytes of an
 uninterrupted one; a checkpoint of another scene or other settings, or a damaged one, is refused
 with what differs; settings that only decide how long or how a render runs may change."""
+
 from __future__ import annotations
 
 import hashlib
@@ -15,8 +16,13 @@ from render.ptpb_stage import run_render_stage
 
 
 def config(**kw) -> PTPBConfig:
-    base = dict(iterations=6, light_paths_per_iteration=2000, snapshot_every=2, checkpoint_every_iterations=3,
-                initial_beam_radius=BeamRadius(value=0.03, unit="m"))
+    base = dict(
+        iterations=6,
+        light_paths_per_iteration=2000,
+        snapshot_every=2,
+        checkpoint_every_iterations=3,
+        initial_beam_radius=BeamRadius(value=0.03, unit="m"),
+    )
     base.update(kw)
     return PTPBConfig(**base)
 
@@ -30,12 +36,14 @@ def test_a_render_resumed_from_its_checkpoint_has_the_bytes_of_an_uninterrupted_
     cfg = config(frame_mode=frame_mode)
     checkpoints = scene_dir / "checkpoints"
     # Called without the stage runner, nothing removes the checkpoint of iteration 3 of 6 ...
-    whole = run_render_stage(scene_dir, cfg, scene_dir / "whole", seed=1, threads=2, quiet=True,
-                             checkpoint_dir=checkpoints)
+    whole = run_render_stage(
+        scene_dir, cfg, scene_dir / "whole", seed=1, threads=2, quiet=True, checkpoint_dir=checkpoints
+    )
     assert (checkpoints / CHECKPOINT_NAME).exists()
     # ... so a second call resumes from it, on another thread count, and renders iterations 4 to 6.
-    resumed = run_render_stage(scene_dir, cfg, scene_dir / "resumed", seed=1, threads=1, quiet=True,
-                               checkpoint_dir=checkpoints)
+    resumed = run_render_stage(
+        scene_dir, cfg, scene_dir / "resumed", seed=1, threads=1, quiet=True, checkpoint_dir=checkpoints
+    )
     assert digests(scene_dir / "whole") == digests(scene_dir / "resumed")
     for key in ("iterations", "light_paths", "beams", "pair_evaluations", "surface_pairs", "final_radius"):
         assert resumed[key] == whole[key], key
@@ -49,10 +57,12 @@ def test_more_iterations_or_threads_continue_the_same_render(scene_dir):
     checkpoints = scene_dir / "checkpoints"
     run_render_stage(scene_dir, config(), scene_dir / "six", seed=1, threads=2, quiet=True, checkpoint_dir=checkpoints)
     longer = config(iterations=8, checkpoint_every_iterations=0, memory_budget_gib=1.0)
-    run_render_stage(scene_dir, longer, scene_dir / "resumed", seed=1, threads=1, quiet=True,
-                     checkpoint_dir=checkpoints)
-    run_render_stage(scene_dir, longer, scene_dir / "fresh", seed=1, threads=2, quiet=True,
-                     checkpoint_dir=scene_dir / "none")
+    run_render_stage(
+        scene_dir, longer, scene_dir / "resumed", seed=1, threads=1, quiet=True, checkpoint_dir=checkpoints
+    )
+    run_render_stage(
+        scene_dir, longer, scene_dir / "fresh", seed=1, threads=2, quiet=True, checkpoint_dir=scene_dir / "none"
+    )
     assert digests(scene_dir / "resumed") == digests(scene_dir / "fresh")
 
 
@@ -66,13 +76,16 @@ def test_a_checkpoint_of_other_settings_or_another_scene_is_refused_naming_what_
         (config(frame_mode="gate"), 1, "alpha 0.8 -> 0.6666666666666666"),
     ]:
         with pytest.raises(ValueError, match=f"other settings .*{changed}.*run without --resume"):
-            run_render_stage(scene_dir, cfg, scene_dir / "b", seed=seed, threads=2, quiet=True,
-                             checkpoint_dir=checkpoints)
+            run_render_stage(
+                scene_dir, cfg, scene_dir / "b", seed=seed, threads=2, quiet=True, checkpoint_dir=checkpoints
+            )
     scene = json.loads((scene_dir / "ptpb_scene.json").read_text())
     scene["media"][0]["g"] = 0.6
     (scene_dir / "ptpb_scene.json").write_text(json.dumps(scene))
     with pytest.raises(ValueError, match="the scene .* changed"):
-        run_render_stage(scene_dir, config(), scene_dir / "b", seed=1, threads=2, quiet=True, checkpoint_dir=checkpoints)
+        run_render_stage(
+            scene_dir, config(), scene_dir / "b", seed=1, threads=2, quiet=True, checkpoint_dir=checkpoints
+        )
     assert not (scene_dir / "b").exists()  # refused before anything was rendered or written
 
 
@@ -81,5 +94,6 @@ def test_a_damaged_checkpoint_is_refused(scene_dir):
     checkpoints.mkdir()
     (checkpoints / CHECKPOINT_NAME).write_bytes(b"PK\x03\x04 not really a zip file")
     with pytest.raises(ValueError, match="cannot read the checkpoint"):
-        run_render_stage(scene_dir, config(), scene_dir / "a", seed=1, threads=2, quiet=True,
-                         checkpoint_dir=checkpoints)
+        run_render_stage(
+            scene_dir, config(), scene_dir / "a", seed=1, threads=2, quiet=True, checkpoint_dir=checkpoints
+        )

@@ -1,12 +1,13 @@
 """Hostile inputs through the core directly (render.ptpb.render with a dict scene): broken meshes,
 extreme but legal media, the memory budget and C++ exceptions. Each case is refused with a
 ValueError that keeps the core's message, or renders finite values in bounded time."""
+
 from __future__ import annotations
 
 import json
 import math
-import subprocess
 import os
+import subprocess
 import sys
 import time
 
@@ -25,17 +26,32 @@ def scene(medium: dict | None = None, box=None, res: int = 12, bins: int = 16) -
     lv, lf = quad_mesh(center=(0, 1.5, 0), u=(0.25, 0, 0), v=(0, 0, 0.25))
     return {
         "media": [medium or {"sigma_s": (3.6, 5.4, 7.2), "sigma_a": (0.4, 0.6, 0.8), "g": 0.7}],
-        "shapes": [{"vertices": cv, "faces": cf, "kind": "null", "interior": 0, "exterior": -1},
-                   {"vertices": lv, "faces": lf, "kind": "diffuse", "albedo": (0, 0, 0), "radiance": (20, 20, 20)}],
-        "camera": {"origin": (0, 0.8, math.sqrt(9 - 0.64)), "target": (0, 0, 0), "up": (0, 1, 0), "fov": 40,
-                   "width": res, "height": res},
+        "shapes": [
+            {"vertices": cv, "faces": cf, "kind": "null", "interior": 0, "exterior": -1},
+            {"vertices": lv, "faces": lf, "kind": "diffuse", "albedo": (0, 0, 0), "radiance": (20, 20, 20)},
+        ],
+        "camera": {
+            "origin": (0, 0.8, math.sqrt(9 - 0.64)),
+            "target": (0, 0, 0),
+            "up": (0, 1, 0),
+            "fov": 40,
+            "width": res,
+            "height": res,
+        },
         "film": {"frame_mode": "bins", "temporal_bins": bins, "start_opl": 3.5, "bin_width_opl": 0.1},
     }
 
 
 def settings(**kw) -> dict:
-    base = {"iterations": 2, "light_paths_per_iteration": 2000, "initial_beam_radius": 0.03, "max_depth": -1,
-            "rr_depth": 5, "seed": 2, "threads": 2}
+    base = {
+        "iterations": 2,
+        "light_paths_per_iteration": 2000,
+        "initial_beam_radius": 0.03,
+        "max_depth": -1,
+        "rr_depth": 5,
+        "seed": 2,
+        "threads": 2,
+    }
     base.update(kw)
     return base
 
@@ -47,6 +63,7 @@ def assert_finite(result) -> None:
 
 # ---------------------------------------------------------------- meshes
 
+
 def with_vertex(value, index=3, axis=1):
     v, f = box_mesh()
     v = v.astype(np.float64)
@@ -54,17 +71,23 @@ def with_vertex(value, index=3, axis=1):
     return v, f
 
 
-@pytest.mark.parametrize("box, message", [
-    ((np.zeros((0, 3)), np.zeros((0, 3), np.uint32)), r"shapes\[0\]: the mesh is empty"),
-    (([], []), r"shapes\[0\].vertices is empty"),
-    (with_vertex(np.nan), r"shapes\[0\].vertices\[3\] is NaN or infinite"),
-    (with_vertex(np.inf), r"shapes\[0\].vertices\[3\] is NaN or infinite"),
-    (with_vertex(1e300), r"shapes\[0\].vertices\[3\] is NaN or infinite"),  # beyond float32: infinite
-    ((box_mesh()[0], np.vstack([box_mesh()[1], [[0, 1, 99]]])), r"shapes\[0\].faces\[12\] refers to vertex 99"),
-    ((box_mesh()[0], np.vstack([box_mesh()[1].astype(np.int64), [[0, -1, 2]]])), r"shapes\[0\].faces\[12\] has vertex index -1"),
-    ((box_mesh()[0][:, :2], box_mesh()[1]), r"shapes\[0\].vertices must be \(N, 3\)"),
-    (("abc", box_mesh()[1]), r"shapes\[0\].vertices must be an array of numbers"),
-])
+@pytest.mark.parametrize(
+    "box, message",
+    [
+        ((np.zeros((0, 3)), np.zeros((0, 3), np.uint32)), r"shapes\[0\]: the mesh is empty"),
+        (([], []), r"shapes\[0\].vertices is empty"),
+        (with_vertex(np.nan), r"shapes\[0\].vertices\[3\] is NaN or infinite"),
+        (with_vertex(np.inf), r"shapes\[0\].vertices\[3\] is NaN or infinite"),
+        (with_vertex(1e300), r"shapes\[0\].vertices\[3\] is NaN or infinite"),  # beyond float32: infinite
+        ((box_mesh()[0], np.vstack([box_mesh()[1], [[0, 1, 99]]])), r"shapes\[0\].faces\[12\] refers to vertex 99"),
+        (
+            (box_mesh()[0], np.vstack([box_mesh()[1].astype(np.int64), [[0, -1, 2]]])),
+            r"shapes\[0\].faces\[12\] has vertex index -1",
+        ),
+        ((box_mesh()[0][:, :2], box_mesh()[1]), r"shapes\[0\].vertices must be \(N, 3\)"),
+        (("abc", box_mesh()[1]), r"shapes\[0\].vertices must be an array of numbers"),
+    ],
+)
 @pytest.mark.filterwarnings("ignore:overflow encountered in cast")  # 1e300 as float32
 def test_broken_meshes_are_refused_naming_the_shape(box, message):
     with pytest.raises(ValueError, match=message):
@@ -96,12 +119,15 @@ def open_box():
     return v, f[:-2]  # one face of the box missing: light and camera paths leave through the hole
 
 
-@pytest.mark.parametrize("name, box", [
-    ("non-manifold (an extra fin)", fin_box()),
-    ("degenerate triangles", degenerate_box()),
-    ("inverted normals (medium outside the box)", (box_mesh()[0], box_mesh()[1][:, ::-1].copy())),
-    ("open (not watertight)", open_box()),
-])
+@pytest.mark.parametrize(
+    "name, box",
+    [
+        ("non-manifold (an extra fin)", fin_box()),
+        ("degenerate triangles", degenerate_box()),
+        ("inverted normals (medium outside the box)", (box_mesh()[0], box_mesh()[1][:, ::-1].copy())),
+        ("open (not watertight)", open_box()),
+    ],
+)
 def test_meshes_the_scene_stage_refuses_still_render_finite_in_the_core(name, box):
     # The core trusts the winding (scene_build refuses these meshes); it must not crash or make NaNs.
     result = render(scene(box=box), settings())
@@ -140,8 +166,13 @@ for name, medium in EXTREME_MEDIA.items():
 
 
 def test_extreme_but_legal_media_render_finite_in_bounded_time():
-    child = subprocess.run([sys.executable, "-c", CHILD.format(tests=str(PROJECT_ROOT / "tests" / "ptpb"))],
-                           capture_output=True, text=True, timeout=120, cwd=PROJECT_ROOT)
+    child = subprocess.run(
+        [sys.executable, "-c", CHILD.format(tests=str(PROJECT_ROOT / "tests" / "ptpb"))],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=PROJECT_ROOT,
+    )
     assert child.returncode == 0, child.stderr[-2000:]  # not killed by a signal (abort, segfault)
     rows = {row["name"]: row for row in map(json.loads, child.stdout.splitlines())}
     assert set(rows) == set(EXTREME_MEDIA)
@@ -156,21 +187,25 @@ def test_extreme_but_legal_media_render_finite_in_bounded_time():
     assert rows["g = +0.999"]["steady_sum"] > 0 and rows["albedo 1, sigma 50 /m"]["steady_sum"] > 0
 
 
-@pytest.mark.parametrize("medium, message", [
-    ({"sigma_s": (1, 1, 1), "g": 1.0}, r"media\[0\].g must lie in \(-1, 1\)"),
-    ({"sigma_s": (1, 1, 1), "g": -1.0}, r"media\[0\].g must lie in \(-1, 1\)"),
-    ({"sigma_s": (-1, 1, 1)}, r"media\[0\].sigma_s must be finite and >= 0"),
-    ({"sigma_s": (np.nan, 1, 1)}, r"media\[0\].sigma_s must be finite and >= 0"),
-    ({"sigma_a": (np.inf, 0, 0)}, r"media\[0\].sigma_a must be finite and >= 0"),
-    ({"sigma_s": (1, 1, 1), "ior": 0.0}, r"media\[0\].ior must be > 0"),
-    ({"sigma_s": (1, 1)}, r"media\[0\].sigma_s must have 3 components"),
-])
+@pytest.mark.parametrize(
+    "medium, message",
+    [
+        ({"sigma_s": (1, 1, 1), "g": 1.0}, r"media\[0\].g must lie in \(-1, 1\)"),
+        ({"sigma_s": (1, 1, 1), "g": -1.0}, r"media\[0\].g must lie in \(-1, 1\)"),
+        ({"sigma_s": (-1, 1, 1)}, r"media\[0\].sigma_s must be finite and >= 0"),
+        ({"sigma_s": (np.nan, 1, 1)}, r"media\[0\].sigma_s must be finite and >= 0"),
+        ({"sigma_a": (np.inf, 0, 0)}, r"media\[0\].sigma_a must be finite and >= 0"),
+        ({"sigma_s": (1, 1, 1), "ior": 0.0}, r"media\[0\].ior must be > 0"),
+        ({"sigma_s": (1, 1)}, r"media\[0\].sigma_s must have 3 components"),
+    ],
+)
 def test_illegal_media_are_refused_naming_the_key(medium, message):
     with pytest.raises(ValueError, match=message):
         render(scene(medium=medium), settings())
 
 
 # ---------------------------------------------------------------- memory budget
+
 
 def test_memory_estimate_counts_every_image_buffer_of_the_core():
     sc = scene(res=12, bins=16)
@@ -196,9 +231,18 @@ def test_a_film_over_the_memory_budget_is_refused_at_once_with_the_keys_to_chang
     message = str(refused.value)
     px3, threads = 4096 * 4096 * 3, cfg.threads or os.cpu_count()
     need = (px3 * 3 * 12 + px3 * 1000 * 4 + threads * 16 * 16 * 3 * 1003 * 8) / 2**30  # 189.20 GiB on 2 threads
-    assert f"the film needs {need:.2f} GiB" in message and "summed in float32" in message and "1000 frames of 4096 x 4096 px" in message
-    for key in ("render.memory_budget_gib = 8", "scene.film.temporal_bins", "scene.camera.width/height",
-                "raise render.memory_budget_gib", "not split into chunks"):
+    assert (
+        f"the film needs {need:.2f} GiB" in message
+        and "summed in float32" in message
+        and "1000 frames of 4096 x 4096 px" in message
+    )
+    for key in (
+        "render.memory_budget_gib = 8",
+        "scene.film.temporal_bins",
+        "scene.camera.width/height",
+        "raise render.memory_budget_gib",
+        "not split into chunks",
+    ):
         assert key in message, key
     small = scene(res=12, bins=16)
     with pytest.raises(ValueError, match="more than render.memory_budget_gib = 1e-05"):
@@ -213,6 +257,7 @@ def test_a_film_over_the_memory_budget_is_refused_at_once_with_the_keys_to_chang
 
 
 # ---------------------------------------------------------------- exceptions
+
 
 def test_core_exceptions_become_python_exceptions_with_their_message():
     with pytest.raises(ValueError, match="grid_resolution must lie in"):

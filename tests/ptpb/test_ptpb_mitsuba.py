@@ -1,8 +1,8 @@
 """Steady comparison with Mitsuba 3 volpath on ptpb.md §10 test 4's cube, reduced for CI:
 24x24 pixels, Mitsuba at 16384 spp, ours with 32 iterations of 100k light paths (R_0 = 1 cm)."""
+
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -32,31 +32,49 @@ def mitsuba_cube(spp: int, seed: int = 0, film: dict | None = None):
         import mitransient  # noqa: F401  (registers its plugins for the variant set above)
 
         integrator = {"type": "transient_prbvolpath", "max_depth": MAXD, "rr_depth": 5, "camera_unwarp": False}
-        film_dict = {"type": "transient_hdr_film", "width": RES, "height": RES, "rfilter": {"type": "box"},
-                     "temporal_bins": film["temporal_bins"], "start_opl": film["start_opl"],
-                     "bin_width_opl": film["bin_width_opl"]}
-    scene = mi.load_dict({
-        "type": "scene",
-        "integrator": integrator,
-        "sensor": {
-            # near_clip: Mitsuba's default of 1 cm would start mitransient's OPL 1 cm past the pinhole.
-            "type": "perspective", "fov": 40, "fov_axis": "x", "near_clip": 1e-4,
-            "to_world": T().look_at(origin=list(cam["origin"]), target=[0, 0, 0], up=[0, 1, 0]),
-            "film": film_dict,
-            "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
-        },
-        "cube": {
-            "type": "cube", "to_world": T().scale(0.5), "bsdf": {"type": "null"},
-            "interior": {"type": "homogeneous", "scale": 8.0, "sigma_t": {"type": "rgb", "value": [0.5, 0.75, 1.0]},
-                         "albedo": {"type": "rgb", "value": [0.9, 0.9, 0.9]}, "phase": {"type": "hg", "g": 0.7}},
-        },
-        "light": {
-            "type": "rectangle",
-            "to_world": T().look_at(origin=[0, 1.5, 0], target=[0, 0, 0], up=[0, 0, 1]) @ T().scale(0.25),
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
-            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
-        },
-    })
+        film_dict = {
+            "type": "transient_hdr_film",
+            "width": RES,
+            "height": RES,
+            "rfilter": {"type": "box"},
+            "temporal_bins": film["temporal_bins"],
+            "start_opl": film["start_opl"],
+            "bin_width_opl": film["bin_width_opl"],
+        }
+    scene = mi.load_dict(
+        {
+            "type": "scene",
+            "integrator": integrator,
+            "sensor": {
+                # near_clip: Mitsuba's default of 1 cm would start mitransient's OPL 1 cm past the pinhole.
+                "type": "perspective",
+                "fov": 40,
+                "fov_axis": "x",
+                "near_clip": 1e-4,
+                "to_world": T().look_at(origin=list(cam["origin"]), target=[0, 0, 0], up=[0, 1, 0]),
+                "film": film_dict,
+                "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
+            },
+            "cube": {
+                "type": "cube",
+                "to_world": T().scale(0.5),
+                "bsdf": {"type": "null"},
+                "interior": {
+                    "type": "homogeneous",
+                    "scale": 8.0,
+                    "sigma_t": {"type": "rgb", "value": [0.5, 0.75, 1.0]},
+                    "albedo": {"type": "rgb", "value": [0.9, 0.9, 0.9]},
+                    "phase": {"type": "hg", "g": 0.7},
+                },
+            },
+            "light": {
+                "type": "rectangle",
+                "to_world": T().look_at(origin=[0, 1.5, 0], target=[0, 0, 0], up=[0, 0, 1]) @ T().scale(0.25),
+                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
+                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
+            },
+        }
+    )
     if film is None:
         return np.asarray(mi.render(scene, spp=spp), dtype=np.float64)[..., :3]
     steady, transient = mi.render(scene, spp=spp)
@@ -72,8 +90,16 @@ def test_steady_cube_mean_and_convergence_against_mitsuba_volpath():
     ref = 0.5 * (ref_a + ref_b)
     medium = ref.mean(-1) > 1e-3 * ref.mean(-1).max()  # pixels that see the lit medium
     assert medium.sum() > 0.2 * RES * RES
-    settings = {"iterations": 64, "light_paths_per_iteration": 20000, "initial_beam_radius": 0.02, "alpha": 0.8,
-                "max_depth": MAXD, "rr_depth": 5, "threads": 2, "snapshot_every": 8}
+    settings = {
+        "iterations": 64,
+        "light_paths_per_iteration": 20000,
+        "initial_beam_radius": 0.02,
+        "alpha": 0.8,
+        "max_depth": MAXD,
+        "rr_depth": 5,
+        "threads": 2,
+        "snapshot_every": 8,
+    }
     runs = [render(cube_scene("steady", res=RES), {**settings, "seed": seed}) for seed in range(12, 18)]
     ratio = np.mean([r.steady[medium].mean(0) for r in runs], axis=0) / ref[medium].mean(0)
     print("ours/mitsuba per channel:", ratio)
@@ -119,10 +145,18 @@ def test_transient_bins_match_mitransient_frame_by_frame():
     scene = cube_scene("bins", res=3 * RES)
     scene["film"] = film
     # R_0 = 1 cm: the kernel's mass lost outside the lit faces takes the earliest light first.
-    settings = {"iterations": 48, "light_paths_per_iteration": 40000, "initial_beam_radius": 0.01, "alpha": 0.8,
-                "max_depth": MAXD, "rr_depth": 5, "threads": 2}
-    profiles = np.array([render(scene, {**settings, "seed": seed}).frames.mean(axis=(1, 2, 3))
-                         for seed in range(31, 47)])
+    settings = {
+        "iterations": 48,
+        "light_paths_per_iteration": 40000,
+        "initial_beam_radius": 0.01,
+        "alpha": 0.8,
+        "max_depth": MAXD,
+        "rr_depth": 5,
+        "threads": 2,
+    }
+    profiles = np.array(
+        [render(scene, {**settings, "seed": seed}).frames.mean(axis=(1, 2, 3)) for seed in range(31, 47)]
+    )
 
     profile_ref, profile = ref_profiles.mean(axis=0), profiles.mean(axis=0)
     energetic = profile_ref > 0.01 * profile_ref.sum()
@@ -130,8 +164,10 @@ def test_transient_bins_match_mitransient_frame_by_frame():
     ratio = profile[energetic] / profile_ref[energetic]
     # The comparison must be able to resolve 3 %: the standard error of the ratio, from the spread
     # of the runs on both sides, is 0.3-0.9 % on most frames and 1.1-1.4 % on the late, faint ones.
-    se = np.hypot(profiles.std(axis=0, ddof=1) / profile / np.sqrt(len(profiles)),
-                  ref_profiles.std(axis=0, ddof=1) / profile_ref / np.sqrt(len(ref_profiles)))[energetic]
+    se = np.hypot(
+        profiles.std(axis=0, ddof=1) / profile / np.sqrt(len(profiles)),
+        ref_profiles.std(axis=0, ddof=1) / profile_ref / np.sqrt(len(ref_profiles)),
+    )[energetic]
     print("per-frame ours/mitransient:", np.round(ratio, 4))
     print("standard error of the ratio:", np.round(se, 4))
     assert se.max() < 0.015 and np.median(se) < 0.008
@@ -168,30 +204,48 @@ def mitsuba_ice_slab(tmp_path, spp: int, seed: int) -> np.ndarray:
     m = scene["media"][0]
     sigma_t = np.add(m["sigma_s"], m["sigma_a"])
     cam = scene["camera"]
-    loaded = mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "volpath", "max_depth": MAXD, "rr_depth": 5},
-        "sensor": {
-            # near_clip: Mitsuba's default of 1 cm would start mitransient's OPL 1 cm past the pinhole.
-            "type": "perspective", "fov": 40, "fov_axis": "x", "near_clip": 1e-4,
-            "to_world": T().look_at(origin=list(cam["origin"]), target=[0, 0, 0], up=[0, 1, 0]),
-            "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
-        },
-        "slab": {
-            "type": "ply", "filename": str(tmp_path / "slab.ply"), "face_normals": True,
-            "bsdf": {"type": "dielectric", "int_ior": 1.31, "ext_ior": 1.0},
-            "interior": {"type": "homogeneous", "scale": float(sigma_t.max()),
-                         "sigma_t": {"type": "rgb", "value": (sigma_t / sigma_t.max()).tolist()},
-                         "albedo": {"type": "rgb", "value": (np.asarray(m["sigma_s"]) / sigma_t).tolist()},
-                         "phase": {"type": "hg", "g": m["g"]}},
-        },
-        "light": {
-            "type": "ply", "filename": str(tmp_path / "light.ply"), "face_normals": True,
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
-            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
-        },
-    })
+    loaded = mi.load_dict(
+        {
+            "type": "scene",
+            "integrator": {"type": "volpath", "max_depth": MAXD, "rr_depth": 5},
+            "sensor": {
+                # near_clip: Mitsuba's default of 1 cm would start mitransient's OPL 1 cm past the pinhole.
+                "type": "perspective",
+                "fov": 40,
+                "fov_axis": "x",
+                "near_clip": 1e-4,
+                "to_world": T().look_at(origin=list(cam["origin"]), target=[0, 0, 0], up=[0, 1, 0]),
+                "film": {
+                    "type": "hdrfilm",
+                    "width": RES,
+                    "height": RES,
+                    "rfilter": {"type": "box"},
+                    "pixel_format": "rgb",
+                },
+                "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
+            },
+            "slab": {
+                "type": "ply",
+                "filename": str(tmp_path / "slab.ply"),
+                "face_normals": True,
+                "bsdf": {"type": "dielectric", "int_ior": 1.31, "ext_ior": 1.0},
+                "interior": {
+                    "type": "homogeneous",
+                    "scale": float(sigma_t.max()),
+                    "sigma_t": {"type": "rgb", "value": (sigma_t / sigma_t.max()).tolist()},
+                    "albedo": {"type": "rgb", "value": (np.asarray(m["sigma_s"]) / sigma_t).tolist()},
+                    "phase": {"type": "hg", "g": m["g"]},
+                },
+            },
+            "light": {
+                "type": "ply",
+                "filename": str(tmp_path / "light.ply"),
+                "face_normals": True,
+                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
+                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
+            },
+        }
+    )
     return np.asarray(mi.render(loaded, spp=spp), dtype=np.float64)[..., :3]
 
 
@@ -199,8 +253,15 @@ def mitsuba_ice_slab(tmp_path, spp: int, seed: int) -> np.ndarray:
 @pytest.mark.slow
 def test_dielectric_ice_slab_matches_mitsuba_volpath(tmp_path):
     ref = 0.5 * (mitsuba_ice_slab(tmp_path, spp=16384, seed=0) + mitsuba_ice_slab(tmp_path, spp=16384, seed=1))
-    settings = {"iterations": 48, "light_paths_per_iteration": 40000, "initial_beam_radius": 0.02, "alpha": 0.8,
-                "max_depth": MAXD, "rr_depth": 5, "threads": 2}
+    settings = {
+        "iterations": 48,
+        "light_paths_per_iteration": 40000,
+        "initial_beam_radius": 0.02,
+        "alpha": 0.8,
+        "max_depth": MAXD,
+        "rr_depth": 5,
+        "threads": 2,
+    }
     ours = np.mean([render(ice_slab_scene(RES), {**settings, "seed": seed}).steady for seed in (21, 22)], axis=0)
     # Both images hold the slab's scattered glow and the light seen through refraction and reflection.
     slab = ref.mean(-1) > 1e-3 * ref.mean(-1).max()

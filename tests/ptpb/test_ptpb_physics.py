@@ -1,4 +1,5 @@
 """Acceptance tests of the PTPB renderer against physics (ptpb.md §10 tests 1–3, 7)."""
+
 from __future__ import annotations
 
 import hashlib
@@ -11,16 +12,24 @@ from render.ptpb import render
 from render.shapes import box_mesh, quad_mesh
 
 
-def single_scattering_scene(ior: float = 1.0, mode: str = "steady", bins: int = 0, start: float = 0.0,
-                            width: float = 0.003) -> dict:
+def single_scattering_scene(
+    ior: float = 1.0, mode: str = "steady", bins: int = 0, start: float = 0.0, width: float = 0.003
+) -> dict:
     """§10 tests 2/3: camera at the centre of a 10 m index-matched cube, point light at (0, -3, 0)."""
     v, f = box_mesh((-10, -10, -10), (10, 10, 10))
     return {
         "media": [{"sigma_s": (0.1, 0.1, 0.1), "sigma_a": (0, 0, 0), "g": 0.0, "ior": ior}],
         "shapes": [{"vertices": v, "faces": f, "kind": "null", "interior": 0, "exterior": -1}],
         "point_lights": [{"position": (0, -3, 0), "intensity": (1, 1, 1), "medium": 0}],
-        "camera": {"origin": (0, 0, 0), "target": (1, 0, 0), "up": (0, 0, 1), "fov": 1.0,
-                   "width": 1, "height": 1, "medium": 0},
+        "camera": {
+            "origin": (0, 0, 0),
+            "target": (1, 0, 0),
+            "up": (0, 0, 1),
+            "fov": 1.0,
+            "width": 1,
+            "height": 1,
+            "medium": 0,
+        },
         "film": {"frame_mode": mode, "temporal_bins": bins, "start_opl": start, "bin_width_opl": width},
     }
 
@@ -42,15 +51,27 @@ def cube_scene(mode: str = "bins", res: int = 24) -> dict:
             {"vertices": cv, "faces": cf, "kind": "null", "interior": 0, "exterior": -1},
             {"vertices": lv, "faces": lf, "kind": "diffuse", "albedo": (0, 0, 0), "radiance": (20, 20, 20)},
         ],
-        "camera": {"origin": (0, 0.8, math.sqrt(9 - 0.64)), "target": (0, 0, 0), "up": (0, 1, 0), "fov": 40,
-                   "width": res, "height": res},
+        "camera": {
+            "origin": (0, 0.8, math.sqrt(9 - 0.64)),
+            "target": (0, 0, 0),
+            "up": (0, 1, 0),
+            "fov": 40,
+            "width": res,
+            "height": res,
+        },
         "film": {"frame_mode": mode, "temporal_bins": 48, "start_opl": 3.5, "bin_width_opl": 0.05},
     }
 
 
 def settings(**kw) -> dict:
-    base = {"iterations": 4, "light_paths_per_iteration": 4000, "initial_beam_radius": 0.03, "max_depth": 32,
-            "seed": 3, "threads": 2}
+    base = {
+        "iterations": 4,
+        "light_paths_per_iteration": 4000,
+        "initial_beam_radius": 0.03,
+        "max_depth": 32,
+        "seed": 3,
+        "threads": 2,
+    }
     base.update(kw)
     return base
 
@@ -64,10 +85,19 @@ def test_single_scattering_matches_analytic_within_2_percent():
     estimates = []
     # R = 0.1 m: the kernel bias is O((R/h)^2) ~ 1e-3 here, and the run-to-run noise is ~1.5%.
     for seed in range(6):
-        r = render(single_scattering_scene(), settings(iterations=6, light_paths_per_iteration=100000,
-                                                        initial_beam_radius=0.1, max_depth=2, seed=seed,
-                                                        accel="grid", grid_resolution=16),
-                   jitter=False)
+        r = render(
+            single_scattering_scene(),
+            settings(
+                iterations=6,
+                light_paths_per_iteration=100000,
+                initial_beam_radius=0.1,
+                max_depth=2,
+                seed=seed,
+                accel="grid",
+                grid_resolution=16,
+            ),
+            jitter=False,
+        )
         estimates.append(r.steady[0, 0].mean())
     est = np.asarray(estimates)
     mean, sigma = est.mean(), est.std(ddof=1) / math.sqrt(len(est))
@@ -87,10 +117,20 @@ def test_bins_frames_sum_to_steady_of_the_same_run():
 def test_gate_time_integral_matches_steady_within_1_percent():
     # Δ·Σ G_k is a Riemann sum of L(τ); frames cover the whole support 3 m .. 20.44 m of OPL.
     bins = int(math.ceil(21.0 / 0.003))
-    r = render(single_scattering_scene(mode="gate", bins=bins),
-               settings(iterations=4, light_paths_per_iteration=50000, initial_beam_radius=0.05,
-                        initial_time_half_width=0.01, max_depth=2, alpha=2 / 3, accel="grid", grid_resolution=16),
-               jitter=False)
+    r = render(
+        single_scattering_scene(mode="gate", bins=bins),
+        settings(
+            iterations=4,
+            light_paths_per_iteration=50000,
+            initial_beam_radius=0.05,
+            initial_time_half_width=0.01,
+            max_depth=2,
+            alpha=2 / 3,
+            accel="grid",
+            grid_resolution=16,
+        ),
+        jitter=False,
+    )
     integral = 0.003 * r.frames[:, 0, 0, 0].sum(dtype=np.float64)
     assert integral == pytest.approx(float(r.steady[0, 0, 0]), rel=0.01)
 
@@ -99,10 +139,18 @@ def test_gate_time_integral_matches_steady_within_1_percent():
 def test_first_arrival_at_n_times_distance(ior, onset_density):
     width = 0.003
     bins = int(4.5 / width)
-    r = render(single_scattering_scene(ior=ior, mode="bins", bins=bins, width=width),
-               settings(iterations=8, light_paths_per_iteration=100000, initial_beam_radius=0.02, max_depth=2,
-                        accel="grid", grid_resolution=16),
-               jitter=False)
+    r = render(
+        single_scattering_scene(ior=ior, mode="bins", bins=bins, width=width),
+        settings(
+            iterations=8,
+            light_paths_per_iteration=100000,
+            initial_beam_radius=0.02,
+            max_depth=2,
+            accel="grid",
+            grid_resolution=16,
+        ),
+        jitter=False,
+    )
     density = r.frames[:, 0, 0, 0] / width
     first = int(np.argmax(density > 0.5 * onset_density))
     expected = int(ior * 3.0 // width)
@@ -115,8 +163,12 @@ def test_first_arrival_at_n_times_distance(ior, onset_density):
 def test_one_and_two_threads_are_bit_identical(mode):
     hashes = []
     for threads in (1, 2):
-        r = render(cube_scene(mode, res=16), settings(threads=threads, iterations=2, light_paths_per_iteration=2000,
-                                                      alpha=2 / 3 if mode == "gate" else 0.8))
+        r = render(
+            cube_scene(mode, res=16),
+            settings(
+                threads=threads, iterations=2, light_paths_per_iteration=2000, alpha=2 / 3 if mode == "gate" else 0.8
+            ),
+        )
         hashes.append((hashlib.sha256(r.steady.tobytes()).hexdigest(), hashlib.sha256(r.frames.tobytes()).hexdigest()))
     assert hashes[0] == hashes[1]
 

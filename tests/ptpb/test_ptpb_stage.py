@@ -1,4 +1,5 @@
 """The render stage writes steady.exr/.npy, frames.npy and stats.json whose numbers agree."""
+
 from __future__ import annotations
 
 import json

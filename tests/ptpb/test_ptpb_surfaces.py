@@ -4,6 +4,7 @@ Every scene here is lit by a delta light with no media in the way (or a pure abs
 glass slab), so the radiance of a Lambertian plane is known exactly: L = E_perp ρ / π, with
 E_perp the irradiance on the plane.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -12,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.schema.ptpb import BeamRadius, PTPBConfig
+from pipeline.schema.ptpb import PTPBConfig
 from render import _core
 from render.ptpb import render, scene_bounding_sphere
 from render.shapes import box_mesh, quad_mesh
@@ -32,20 +33,41 @@ def sun(theta_deg: float, irradiance: float) -> dict:
     return {"to_sun": (math.sin(th), 0.0, math.cos(th)), "irradiance": (irradiance,) * 3}
 
 
-def scene(shapes: list, *, media=(), directional=(), point=(), res: int = 16, fov: float = 10.0,
-          origin=tuple(CAMERA), mode: str = "steady", bins: int = 0, start: float = 0.0, width: float = 0.01) -> dict:
+def scene(
+    shapes: list,
+    *,
+    media=(),
+    directional=(),
+    point=(),
+    res: int = 16,
+    fov: float = 10.0,
+    origin=tuple(CAMERA),
+    mode: str = "steady",
+    bins: int = 0,
+    start: float = 0.0,
+    width: float = 0.01,
+) -> dict:
     """Camera looking straight down at the origin (up = +y)."""
     return {
-        "media": list(media), "shapes": list(shapes),
-        "directional_lights": list(directional), "point_lights": list(point),
+        "media": list(media),
+        "shapes": list(shapes),
+        "directional_lights": list(directional),
+        "point_lights": list(point),
         "camera": {"origin": origin, "target": (0, 0, 0), "up": (0, 1, 0), "fov": fov, "width": res, "height": res},
         "film": {"frame_mode": mode, "temporal_bins": bins, "start_opl": start, "bin_width_opl": width},
     }
 
 
 def settings(**kw) -> dict:
-    base = {"iterations": 8, "light_paths_per_iteration": 200000, "initial_beam_radius": 0.05,
-            "initial_surface_radius": 0.06, "max_depth": 16, "seed": 1, "threads": 2}
+    base = {
+        "iterations": 8,
+        "light_paths_per_iteration": 200000,
+        "initial_beam_radius": 0.05,
+        "initial_surface_radius": 0.06,
+        "max_depth": 16,
+        "seed": 1,
+        "threads": 2,
+    }
     base.update(kw)
     return base
 
@@ -63,7 +85,7 @@ def pixel_hits(sc: dict) -> np.ndarray:
     ty = tx * h / w
     sx = (np.arange(w) + 0.5) / w
     sy = (np.arange(h) + 0.5) / h
-    d = (left * ((1 - 2 * sx)[None, :, None] * tx) + up * ((1 - 2 * sy)[:, None, None] * ty) + forward)
+    d = left * ((1 - 2 * sx)[None, :, None] * tx) + up * ((1 - 2 * sy)[:, None, None] * ty) + forward
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     t = -o[2] / d[..., 2]
     return o + d * t[..., None]
@@ -71,7 +93,7 @@ def pixel_hits(sc: dict) -> np.ndarray:
 
 def centre(a: np.ndarray, k: int) -> np.ndarray:
     h, w = a.shape[:2]
-    return a[h // 2 - k // 2: h // 2 + k // 2, w // 2 - k // 2: w // 2 + k // 2]
+    return a[h // 2 - k // 2 : h // 2 + k // 2, w // 2 - k // 2 : w // 2 + k // 2]
 
 
 def sun_tau(sc: dict, x: np.ndarray, theta_deg: float) -> np.ndarray:
@@ -93,7 +115,8 @@ def test_sunlit_plane_radiance_is_E_cos_rho_over_pi(theta):
     assert r.stats["initial_surface_radius_m"] == pytest.approx(2 * footprint, rel=1e-9)
     assert r.stats["surface_alpha"] == pytest.approx(2 / 3)
     assert r.stats["final_surface_radius"] == pytest.approx(
-        2 * footprint * math.sqrt(_core.ptpb_schedule_gamma(9, 2 / 3)), rel=1e-9)
+        2 * footprint * math.sqrt(_core.ptpb_schedule_gamma(9, 2 / 3)), rel=1e-9
+    )
     assert r.stats["surface_photons"] > 0 and r.stats["surface_pairs"] > 0
     expected = E * math.cos(math.radians(theta)) * ALBEDO / math.pi
     ratio = float(centre(r.steady, 8).mean(dtype=np.float64)) / expected
@@ -135,8 +158,9 @@ def test_sunlit_plane_bins_sum_to_steady_and_arrive_on_time(theta):
     # camera_unwarp drops the camera leg: the light arrives at the plane's own τ.
     sc_u = scene([plane()], directional=[sun(theta, E)], mode="bins", bins=60, start=0.4, width=width)
     u = render(sc_u, settings(iterations=1, light_paths_per_iteration=50000, camera_unwarp=True), jitter=False)
-    mean_u = (u.frames[..., 0].sum((1, 2), dtype=np.float64) * (0.4 + (np.arange(60) + 0.5) * width)).sum() / \
-        u.frames[..., 0].sum(dtype=np.float64)
+    mean_u = (u.frames[..., 0].sum((1, 2), dtype=np.float64) * (0.4 + (np.arange(60) + 0.5) * width)).sum() / u.frames[
+        ..., 0
+    ].sum(dtype=np.float64)
     assert mean_u == pytest.approx(float(sun_tau(sc_u, pixel_hits(sc_u), theta).mean()), abs=0.5 * width)
 
 
@@ -147,8 +171,17 @@ def test_gate_frames_use_the_surface_time_kernel_and_schedule():
     width, bins, start, t0 = 0.01, 60, 3.4, 0.03
     sc = scene([plane()], directional=[sun(0.0, 2.0)], mode="gate", bins=bins, start=start, width=width)
     n = 3
-    r = render(sc, settings(iterations=n, light_paths_per_iteration=50000, initial_time_half_width=0.011,
-                            initial_surface_time_half_width=t0, snapshot_every=1), jitter=False)
+    r = render(
+        sc,
+        settings(
+            iterations=n,
+            light_paths_per_iteration=50000,
+            initial_time_half_width=0.011,
+            initial_surface_time_half_width=t0,
+            snapshot_every=1,
+        ),
+        jitter=False,
+    )
     gammas = [_core.ptpb_schedule_gamma(i, 4 / 7) for i in range(n)]
     assert r.stats["final_surface_time_half_width"] == pytest.approx(t0 * gammas[-1] ** (1 / 3), rel=1e-12)
     assert r.stats["final_surface_radius"] == pytest.approx(0.06 * gammas[-1] ** (1 / 3), rel=1e-12)
@@ -167,21 +200,25 @@ def test_gate_frames_use_the_surface_time_kernel_and_schedule():
 
 
 def test_point_light_over_plane_foot_radiance_is_I_rho_over_pi_h2():
-    I, h = 1.5, 1.0
+    intensity, h = 1.5, 1.0
     # Camera 2.5 m up, looking through the (point, invisible) light at its foot; image ±0.2 m.
     fov = 2 * math.degrees(math.atan(0.2 / 2.5))
-    sc = scene([plane(half=1.0)], point=[{"position": (0, 0, h), "intensity": (I,) * 3}], origin=(0, 0, 2.5), fov=fov)
+    sc = scene(
+        [plane(half=1.0)], point=[{"position": (0, 0, h), "intensity": (intensity,) * 3}], origin=(0, 0, 2.5), fov=fov
+    )
     r = render(sc, settings(iterations=8, light_paths_per_iteration=1000000, initial_surface_radius=0.05), jitter=False)
     x = pixel_hits(sc)
     rho2 = (x[..., :2] ** 2).sum(-1)
-    analytic = I * ALBEDO * h / (math.pi * (h * h + rho2) ** 1.5)  # E = I cos θ / d²
-    foot = I * ALBEDO / (math.pi * h * h)
+    analytic = intensity * ALBEDO * h / (math.pi * (h * h + rho2) ** 1.5)  # E = I cos θ / d²
+    foot = intensity * ALBEDO / (math.pi * h * h)
     est = centre(r.steady[..., 0], 4).mean(dtype=np.float64)
     ratio_pixels = est / centre(analytic, 4).mean()
     ratio_foot = est / foot
     wide = centre(r.steady[..., 0], 12).mean(dtype=np.float64) / centre(analytic, 12).mean()
-    print(f"point light: centre 4x4 / analytic {ratio_pixels:.4f}, / I ρ/(π h²) {ratio_foot:.4f}, "
-          f"12x12 {wide:.4f}, {r.stats['time_total_s']:.2f} s")
+    print(
+        f"point light: centre 4x4 / analytic {ratio_pixels:.4f}, / I ρ/(π h²) {ratio_foot:.4f}, "
+        f"12x12 {wide:.4f}, {r.stats['time_total_s']:.2f} s"
+    )
     assert abs(ratio_foot - 1) < 0.03
     assert abs(ratio_pixels - 1) < 0.03
     assert abs(wide - 1) < 0.02
@@ -192,15 +229,26 @@ def test_surfaces_with_media_are_bit_identical_across_threads(mode):
     # A scattering cube standing on a diffuse floor under the sun: beams, photons and beams fed by
     # photons (light reflected off the floor into the medium) all meet in one image.
     cv, cf = box_mesh((-0.3, -0.3, 0.0), (0.3, 0.3, 0.6))
-    sc = scene([plane(half=1.0), {"vertices": cv, "faces": cf, "kind": "null", "interior": 0, "exterior": -1}],
-               media=[{"sigma_s": (2.0, 3.0, 4.0), "sigma_a": (0.2, 0.2, 0.2), "g": 0.5, "ior": 1.0}],
-               directional=[sun(40.0, 2.0)], origin=(0.0, -2.0, 2.0), fov=50, mode=mode, bins=40, start=3.0,
-               width=0.05)
+    sc = scene(
+        [plane(half=1.0), {"vertices": cv, "faces": cf, "kind": "null", "interior": 0, "exterior": -1}],
+        media=[{"sigma_s": (2.0, 3.0, 4.0), "sigma_a": (0.2, 0.2, 0.2), "g": 0.5, "ior": 1.0}],
+        directional=[sun(40.0, 2.0)],
+        origin=(0.0, -2.0, 2.0),
+        fov=50,
+        mode=mode,
+        bins=40,
+        start=3.0,
+        width=0.05,
+    )
     sc["camera"]["up"] = (0, 0, 1)
     results = []
     for threads in (1, 2):
-        r = render(sc, settings(iterations=2, light_paths_per_iteration=20000, threads=threads,
-                                alpha=2 / 3 if mode == "gate" else 0.8))
+        r = render(
+            sc,
+            settings(
+                iterations=2, light_paths_per_iteration=20000, threads=threads, alpha=2 / 3 if mode == "gate" else 0.8
+            ),
+        )
         results.append(r)
     a, b = results
     assert a.stats["surface_pairs"] > 0 and a.stats["pair_evaluations"] > 0
@@ -216,15 +264,23 @@ def test_floor_under_an_absorbing_slab_is_attenuated_twice():
     sigma_a = np.array([1.0, 2.0, 4.0])
     theta, E, d = 30.0, 2.0, 0.1
     sv, sf = box_mesh((-0.8, -0.6, 0.1), (0.8, 0.6, 0.2))
-    sc = scene([plane(), {"vertices": sv, "faces": sf, "kind": "null", "interior": 0, "exterior": -1}],
-               media=[{"sigma_s": (0, 0, 0), "sigma_a": tuple(sigma_a), "g": 0.0, "ior": 1.0}],
-               directional=[sun(theta, E)])
+    sc = scene(
+        [plane(), {"vertices": sv, "faces": sf, "kind": "null", "interior": 0, "exterior": -1}],
+        media=[{"sigma_s": (0, 0, 0), "sigma_a": tuple(sigma_a), "g": 0.0, "ior": 1.0}],
+        directional=[sun(theta, E)],
+    )
     r = render(sc, settings(iterations=10, light_paths_per_iteration=400000, max_depth=2), jitter=False)
     x = pixel_hits(sc)
     cos_cam = (CAMERA[2] - x[..., 2]) / np.linalg.norm(CAMERA - x, axis=-1)
     cos_sun = math.cos(math.radians(theta))
-    analytic = (E * cos_sun * ALBEDO / math.pi * np.exp(-sigma_a * d / cos_sun)[None, None]
-                * np.exp(-sigma_a[None, None] * d / cos_cam[..., None]))
+    analytic = (
+        E
+        * cos_sun
+        * ALBEDO
+        / math.pi
+        * np.exp(-sigma_a * d / cos_sun)[None, None]
+        * np.exp(-sigma_a[None, None] * d / cos_cam[..., None])
+    )
     ratio = centre(r.steady, 8).mean((0, 1), dtype=np.float64) / centre(analytic, 8).mean((0, 1))
     print(f"absorbing slab: centre 8x8 / analytic per channel {np.round(ratio, 4).tolist()}")
     assert np.all(np.abs(ratio - 1) < 0.02), ratio
@@ -237,15 +293,18 @@ def test_max_depth_counts_light_and_camera_interactions_through_glass():
     # L = E ρ/π (1 − F(0))² (1 − F(φ))² (the camera's (n_i/n_t)² factors cancel in and out).
     gv, gf = box_mesh((-0.6, -0.6, 0.1), (0.6, 0.6, 0.2))
     glass = {"vertices": gv, "faces": gf, "kind": "dielectric", "interior": 0, "exterior": -1}
-    sc = scene([plane(), glass], media=[{"sigma_s": (0, 0, 0), "sigma_a": (0, 0, 0), "g": 0.0, "ior": 1.5}],
-               directional=[sun(0.0, 2.0)])
+    sc = scene(
+        [plane(), glass],
+        media=[{"sigma_s": (0, 0, 0), "sigma_a": (0, 0, 0), "g": 0.0, "ior": 1.5}],
+        directional=[sun(0.0, 2.0)],
+    )
     base = settings(iterations=10, light_paths_per_iteration=400000, rr_depth=64)
     black = render(sc, {**base, "iterations": 1, "max_depth": 5}, jitter=False)
     assert black.stats["surface_photons"] > 0 and float(black.steady.max()) == 0.0
     r6 = render(sc, {**base, "max_depth": 6}, jitter=False)
 
     def fresnel(cos_i, n_i=1.0, n_t=1.5):
-        sin_t2 = (n_i / n_t) ** 2 * (1 - cos_i ** 2)
+        sin_t2 = (n_i / n_t) ** 2 * (1 - cos_i**2)
         cos_t = np.sqrt(1 - sin_t2)
         rs = (n_i * cos_i - n_t * cos_t) / (n_i * cos_i + n_t * cos_t)
         rp = (n_t * cos_i - n_i * cos_t) / (n_t * cos_i + n_i * cos_t)
@@ -258,7 +317,9 @@ def test_max_depth_counts_light_and_camera_interactions_through_glass():
     analytic = 2.0 * ALBEDO / math.pi * (1 - fresnel(1.0)) ** 2 * (1 - fresnel(cos_cam)) ** 2
     ratio = centre(r6.steady[..., 0], 8).mean(dtype=np.float64) / centre(analytic, 8).mean()
     unbounded = render(sc, {**base, "iterations": 4, "max_depth": -1}, jitter=False)
-    gain = centre(unbounded.steady[..., 0], 8).mean(dtype=np.float64) / centre(r6.steady[..., 0], 8).mean(dtype=np.float64)
+    gain = centre(unbounded.steady[..., 0], 8).mean(dtype=np.float64) / centre(r6.steady[..., 0], 8).mean(
+        dtype=np.float64
+    )
     print(f"glass: depth 6 / analytic {ratio:.4f}; unbounded / depth 6 {gain:.4f}")
     assert abs(ratio - 1) < 0.02, ratio
     assert gain > 1.01  # inter-reflections between floor and glass add light beyond depth 6

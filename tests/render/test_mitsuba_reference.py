@@ -4,6 +4,7 @@ Scenes are tiny (≤ 24x16 pixels) and built here from render.shapes meshes. Eac
 that the export could get wrong: pixel mapping, radiance units, sun models, energy and time in the
 transient film, the dielectric refusal and the stage's files.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -18,21 +19,43 @@ from pipeline.schema.scene import ReferenceConfig
 from render import shapes
 from render.exr import read_exr
 from render.ply import write_ply
-from render.scene import (Camera, Film, Medium, Scene, Shape, bounding_sphere_of_points, camera_ray_direction,
-                          pixel_footprint, project_to_pixel)
+from render.scene import (
+    Camera,
+    Film,
+    Medium,
+    Scene,
+    Shape,
+    bounding_sphere_of_points,
+    camera_ray_direction,
+    pixel_footprint,
+    project_to_pixel,
+)
 
 mi = pytest.importorskip("mitsuba")
 if importlib.util.find_spec("mitransient") is None:  # not imported here: it needs a variant set first
     pytest.skip("mitransient is not installed", allow_module_level=True)
 
-from render.mitsuba_ref import (ReferenceRefused, check_reference_limits, render_steady,  # noqa: E402
-                                render_transient, run_reference_stage)
+from render.mitsuba_ref import (  # noqa: E402
+    ReferenceRefused,
+    check_reference_limits,
+    render_steady,
+    render_transient,
+    run_reference_stage,
+)
 
 pytestmark = pytest.mark.mitsuba
 
 
-def make_scene(tmp_path: Path, objects: list[tuple[str, tuple, dict]], *, camera: Camera, lights=(),
-               film: Film | None = None, media: dict | None = None, max_depth: int = -1) -> Scene:
+def make_scene(
+    tmp_path: Path,
+    objects: list[tuple[str, tuple, dict]],
+    *,
+    camera: Camera,
+    lights=(),
+    film: Film | None = None,
+    media: dict | None = None,
+    max_depth: int = -1,
+) -> Scene:
     """Write each (name, mesh, Shape kwargs) under tmp_path/meshes and return the scene (saved as scene.json)."""
     shape_list, points = [], []
     for name, (v, f), kwargs in objects:
@@ -40,15 +63,30 @@ def make_scene(tmp_path: Path, objects: list[tuple[str, tuple, dict]], *, camera
         shape_list.append(Shape(name=name, mesh=f"meshes/{name}.ply", **kwargs))
         points.append(v)
     centre, radius = bounding_sphere_of_points(np.concatenate(points))
-    scene = Scene(camera=camera, film=film or Film(), media=media or {}, shapes=shape_list, lights=list(lights),
-                  max_depth=max_depth, rr_depth=5, bounding_sphere={"center": centre.tolist(), "radius": radius})
+    scene = Scene(
+        camera=camera,
+        film=film or Film(),
+        media=media or {},
+        shapes=shape_list,
+        lights=list(lights),
+        max_depth=max_depth,
+        rr_depth=5,
+        bounding_sphere={"center": centre.tolist(), "radius": radius},
+    )
     scene.save(tmp_path / "scene.json")
     return scene
 
 
 def sun(to_sun, irradiance, model="directional", **extra) -> dict:
-    return {"type": "sun", "model": model, "to_sun": list(to_sun), "irradiance": list(irradiance),
-            "angular_diameter_deg": 0.53, "reference_point": None, **extra}
+    return {
+        "type": "sun",
+        "model": model,
+        "to_sun": list(to_sun),
+        "irradiance": list(irradiance),
+        "angular_diameter_deg": 0.53,
+        "reference_point": None,
+        **extra,
+    }
 
 
 def null_medium(sigma_s, sigma_a, g=0.5, boundary="null", ior=1.0) -> Medium:
@@ -57,10 +95,18 @@ def null_medium(sigma_s, sigma_a, g=0.5, boundary="null", ior=1.0) -> Medium:
 
 # ---------------------------------------------------------------- camera conventions
 
+
 @pytest.mark.parametrize("fov_axis", ["x", "y"])
 def test_project_to_pixel_matches_mitsuba_pixels(tmp_path, fov_axis):
-    cam = Camera(origin=(0.3, -2.0, 0.5), target=(0.1, 0.2, 0.0), up=(0.0, 0.0, 1.0), fov=30.0,
-                 width=24, height=16, fov_axis=fov_axis)
+    cam = Camera(
+        origin=(0.3, -2.0, 0.5),
+        target=(0.1, 0.2, 0.0),
+        up=(0.0, 0.0, 1.0),
+        fov=30.0,
+        width=24,
+        height=16,
+        fov_axis=fov_axis,
+    )
     i, j = 17, 4  # right half, upper half: a flip of either axis lands elsewhere
     d = camera_ray_direction(cam, np.array(i + 0.5), np.array(j + 0.5))
     p = np.asarray(cam.origin) + 2.0 * d
@@ -69,8 +115,17 @@ def test_project_to_pixel_matches_mitsuba_pixels(tmp_path, fov_axis):
     u = np.cross(d, [0.0, 0.0, 1.0])
     u /= np.linalg.norm(u)
     v = np.cross(u, d)  # u x v = -d: the emitting side faces the camera
-    scene = make_scene(tmp_path, [("tile", shapes.quad_mesh(p, half * u, half * v),
-                                   {"kind": "diffuse", "albedo": (0, 0, 0), "emission": (5.0, 5.0, 5.0)})], camera=cam)
+    scene = make_scene(
+        tmp_path,
+        [
+            (
+                "tile",
+                shapes.quad_mesh(p, half * u, half * v),
+                {"kind": "diffuse", "albedo": (0, 0, 0), "emission": (5.0, 5.0, 5.0)},
+            )
+        ],
+        camera=cam,
+    )
     spp = 4096
     image, _ = render_steady(scene, tmp_path, spp=spp, spp_per_pass=spp, quiet=True)
     assert image.shape == (16, 24, 3)
@@ -90,8 +145,7 @@ def test_project_to_pixel_matches_mitsuba_pixels(tmp_path, fov_axis):
 # ---------------------------------------------------------------- radiance units, both sun models
 
 SLAB = ("slab", shapes.box_mesh((-1, -1, -0.2), (1, 1, 0)), {"kind": "diffuse", "albedo": (0.5, 0.5, 0.5)})
-PLANE_CAM = Camera(origin=(0.4, -0.3, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30.0,
-                   width=16, height=12)
+PLANE_CAM = Camera(origin=(0.4, -0.3, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30.0, width=16, height=12)
 
 
 @pytest.mark.parametrize("model", ["directional", "disk"])
@@ -101,14 +155,19 @@ def test_lambertian_plane_under_the_sun(tmp_path, model, zenith_deg):
     z = math.radians(zenith_deg)
     to_sun = (math.sin(z), 0.0, math.cos(z))
     extra = {"disk_distance_radii": 1000.0} if model == "disk" else {}
-    scene = make_scene(tmp_path, [("slab", shapes.box_mesh((-1, -1, -0.2), (1, 1, 0)),
-                                   {"kind": "diffuse", "albedo": (rho, rho, rho)})],
-                       camera=PLANE_CAM, lights=[sun(to_sun, irradiance, model, **extra)])
+    scene = make_scene(
+        tmp_path,
+        [("slab", shapes.box_mesh((-1, -1, -0.2), (1, 1, 0)), {"kind": "diffuse", "albedo": (rho, rho, rho)})],
+        camera=PLANE_CAM,
+        lights=[sun(to_sun, irradiance, model, **extra)],
+    )
     image, timing = render_steady(scene, tmp_path, spp=16, spp_per_pass=16, quiet=True)
     expected = irradiance * math.cos(z) * rho / math.pi
     ratio = image.reshape(-1, 3).mean(0) / expected
-    print(f"{model} sun, zenith {zenith_deg}: ratio {ratio}, spread {image.std((0, 1)) / expected}, "
-          f"{timing['seconds']:.2f} s")
+    print(
+        f"{model} sun, zenith {zenith_deg}: ratio {ratio}, spread {image.std((0, 1)) / expected}, "
+        f"{timing['seconds']:.2f} s"
+    )
     np.testing.assert_allclose(ratio, 1.0, atol=0.01)
     np.testing.assert_allclose(image / expected, 1.0, atol=0.01)  # every pixel sees the lit top face
 
@@ -136,16 +195,19 @@ def test_point_and_spot_light_on_a_plane(tmp_path, kind):
 
 # ---------------------------------------------------------------- transient: energy
 
+
 def medium_cube_scene(tmp_path: Path) -> Scene:
     sigma_s = np.array([3.6, 2.7, 1.8])  # sigma_t (4, 3, 2) m-1, albedo 0.9
-    cam = Camera(origin=(2.0, -2.5, 1.2), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0), fov=35.0,
-                 width=20, height=14)
+    cam = Camera(origin=(2.0, -2.5, 1.2), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0), fov=35.0, width=20, height=14)
     return make_scene(
-        tmp_path, [("cube", shapes.box_mesh(), {"kind": "null", "interior": "fog"})], camera=cam,
+        tmp_path,
+        [("cube", shapes.box_mesh(), {"kind": "null", "interior": "fog"})],
+        camera=cam,
         lights=[{"type": "point", "position": [0.0, 0.0, 1.2], "intensity": [10.0, 10.0, 10.0], "medium": None}],
         # 40 m of OPL: leaving it needs ~140 scatterings (0.9^140 ~ 4e-7 of the energy).
         film=Film(mode="transient", temporal_bins=400, start_opl=0.0, bin_width_opl=0.1),
-        media={"fog": null_medium(sigma_s, sigma_s / 9.0, g=0.5)})
+        media={"fog": null_medium(sigma_s, sigma_s / 9.0, g=0.5)},
+    )
 
 
 def test_transient_energy_matches_steady_and_volpath(tmp_path):
@@ -180,6 +242,7 @@ def test_transient_energy_matches_steady_and_volpath(tmp_path):
 
 # ---------------------------------------------------------------- transient: time
 
+
 def pulse_plane_scene(tmp_path: Path, with_medium: bool) -> tuple[Scene, float]:
     cam = Camera(origin=(0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=3.0, width=16, height=12)
     # Off the view cone: a light the camera looks through would outshine the plane with its haze glow,
@@ -189,13 +252,26 @@ def pulse_plane_scene(tmp_path: Path, with_medium: bool) -> tuple[Scene, float]:
     media = {}
     if with_medium:
         # Region index n = 1 (null boundary): OPL = geometric length; the light sits inside the box.
-        objects.append(("haze", shapes.box_mesh((-0.5, -0.5, 0.1), (0.5, 0.5, 2.5)),
-                        {"kind": "null", "interior": "haze"}))
+        objects.append(
+            ("haze", shapes.box_mesh((-0.5, -0.5, 0.1), (0.5, 0.5, 2.5)), {"kind": "null", "interior": "haze"})
+        )
         media = {"haze": null_medium((0.1, 0.1, 0.1), (0.05, 0.05, 0.05), g=0.3, ior=1.0)}
     film = Film(mode="transient", temporal_bins=80, start_opl=0.04, bin_width_opl=0.1)
-    scene = make_scene(tmp_path, objects, camera=cam, film=film, media=media, lights=[
-        {"type": "point", "position": light.tolist(), "intensity": [5.0, 5.0, 5.0],
-         "medium": "haze" if with_medium else None}])
+    scene = make_scene(
+        tmp_path,
+        objects,
+        camera=cam,
+        film=film,
+        media=media,
+        lights=[
+            {
+                "type": "point",
+                "position": light.tolist(),
+                "intensity": [5.0, 5.0, 5.0],
+                "medium": "haze" if with_medium else None,
+            }
+        ],
+    )
     # Predicted τ = |light - x| + |x - camera| for the plane point x of every pixel corner and centre.
     px, py = np.meshgrid(np.linspace(0, cam.width, 33), np.linspace(0, cam.height, 25))
     d = camera_ray_direction(cam, px.ravel(), py.ravel())
@@ -214,8 +290,10 @@ def test_pulse_arrival_bin(tmp_path, with_medium):
     profile = frames.sum((1, 2, 3), dtype=np.float64)
     peak = int(np.argmax(profile))
     fraction = profile[predicted] / profile.sum()
-    print(f"{'medium' if with_medium else 'vacuum'}: predicted bin {predicted}, peak {peak}, "
-          f"fraction in it {fraction:.4f}, {timing['seconds']:.2f} s")
+    print(
+        f"{'medium' if with_medium else 'vacuum'}: predicted bin {predicted}, peak {peak}, "
+        f"fraction in it {fraction:.4f}, {timing['seconds']:.2f} s"
+    )
     assert peak == predicted
     # Vacuum: the only light is plane -> camera, all in one bin. Haze spreads ~50 % over other bins.
     assert fraction > (0.5 if with_medium else 0.999)
@@ -228,9 +306,13 @@ def test_disk_sun_frames_on_the_ptpb_time_axis(tmp_path):
     centre, radius = bounding_sphere_of_points(mesh[0])
     s = np.array([0.0, 0.0, 1.0])
     p0 = centre + radius * s  # ptpb.md §1: the τ = 0 plane touches the bounding sphere on the sun's side
-    scene = make_scene(tmp_path, [("plane", mesh, {"kind": "diffuse", "albedo": (0.5, 0.5, 0.5)})], camera=cam,
-                       film=film, lights=[sun(s, (1000.0, 1000.0, 1000.0), "disk", disk_distance_radii=1000.0,
-                                              tau_origin_point=p0.tolist())])
+    scene = make_scene(
+        tmp_path,
+        [("plane", mesh, {"kind": "diffuse", "albedo": (0.5, 0.5, 0.5)})],
+        camera=cam,
+        film=film,
+        lights=[sun(s, (1000.0, 1000.0, 1000.0), "disk", disk_distance_radii=1000.0, tau_origin_point=p0.tolist())],
+    )
     # Predicted τ = (P0 - x)·s + |x - camera| over the plane points the film sees.
     px, py = np.meshgrid(np.linspace(0, cam.width, 33), np.linspace(0, cam.height, 25))
     d = camera_ray_direction(cam, px.ravel(), py.ravel())
@@ -240,9 +322,11 @@ def test_disk_sun_frames_on_the_ptpb_time_axis(tmp_path):
     assert bins.min() == bins.max(), "test set-up: the plane's τ range must fall in one bin"
     frames, steady, timing = render_transient(scene, tmp_path, spp=16, spp_per_pass=16, quiet=True)
     profile = frames.sum((1, 2, 3), dtype=np.float64)
-    print(f"disk sun: predicted bin {bins[0]}, peak {np.argmax(profile)}, "
-          f"fraction {profile[bins[0]] / profile.sum():.5f}, "
-          f"window shift {timing['start_opl_shift_m']:.3f} m (D - R_s = {999 * radius:.3f})")
+    print(
+        f"disk sun: predicted bin {bins[0]}, peak {np.argmax(profile)}, "
+        f"fraction {profile[bins[0]] / profile.sum():.5f}, "
+        f"window shift {timing['start_opl_shift_m']:.3f} m (D - R_s = {999 * radius:.3f})"
+    )
     assert timing["start_opl_shift_m"] == pytest.approx(999 * radius, rel=1e-9)
     assert profile[bins[0]] / profile.sum() > 0.999
     np.testing.assert_allclose(frames.sum(0), steady, rtol=1e-4)
@@ -251,16 +335,24 @@ def test_disk_sun_frames_on_the_ptpb_time_axis(tmp_path):
 
 # ---------------------------------------------------------------- the dielectric refusal
 
+
 def test_delta_sun_through_dielectric_is_refused_and_forced_renders_black(tmp_path):
     cam = Camera(origin=(2.0, -2.5, 1.5), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0), fov=35.0, width=16, height=12)
     sigma_s = (8.0, 8.0, 8.0)
     images = {}
     for boundary in ("dielectric", "null"):
         folder = tmp_path / boundary
-        scene = make_scene(folder, [("ice", shapes.box_mesh(), {"kind": boundary, "interior": "ice"})], camera=cam,
-                           lights=[sun((0.3, 0.2, 0.93), (1000.0, 1000.0, 1000.0))],
-                           media={"ice": null_medium(sigma_s, (0.05, 0.05, 0.05), boundary=boundary,
-                                                     ior=1.31 if boundary == "dielectric" else 1.0)})
+        scene = make_scene(
+            folder,
+            [("ice", shapes.box_mesh(), {"kind": boundary, "interior": "ice"})],
+            camera=cam,
+            lights=[sun((0.3, 0.2, 0.93), (1000.0, 1000.0, 1000.0))],
+            media={
+                "ice": null_medium(
+                    sigma_s, (0.05, 0.05, 0.05), boundary=boundary, ior=1.31 if boundary == "dielectric" else 1.0
+                )
+            },
+        )
         if boundary == "dielectric":
             with pytest.raises(ReferenceRefused) as refused:
                 check_reference_limits(scene, transient=False, force=False)
@@ -288,8 +380,12 @@ def test_delta_sun_through_dielectric_is_refused_and_forced_renders_black(tmp_pa
 
 def test_transient_warnings():
     cam = Camera(origin=(0, 0, 3), target=(0, 0, 0), up=(0, 1, 0), fov=30, width=8, height=8)
-    scene = Scene(camera=cam, film=Film(mode="transient", temporal_bins=4), shapes=[],
-                  lights=[sun((0, 0, 1), (1, 1, 1)), {"type": "sky", "radiance": [1.0, 1.0, 1.0]}])
+    scene = Scene(
+        camera=cam,
+        film=Film(mode="transient", temporal_bins=4),
+        shapes=[],
+        lights=[sun((0, 0, 1), (1, 1, 1)), {"type": "sky", "radiance": [1.0, 1.0, 1.0]}],
+    )
     steady = check_reference_limits(scene, transient=False, force=False)
     transient = check_reference_limits(scene, transient=True, force=False)
     assert steady == []
@@ -299,6 +395,7 @@ def test_transient_warnings():
 
 
 # ---------------------------------------------------------------- passes, seeds, budget
+
 
 def test_passes_seeds_and_budget(tmp_path):
     scene = medium_cube_scene(tmp_path)
@@ -311,8 +408,10 @@ def test_passes_seeds_and_budget(tmp_path):
     np.testing.assert_array_equal(a, b)
     assert np.abs(a - c).max() > 0
     # Seeds 5, 6, 7 in 3 passes of 4 spp each equal the spp-weighted mean of single passes.
-    singles = [render_steady(scene, tmp_path, spp=n, spp_per_pass=n, seed=s, quiet=True)[0]
-               for s, n in ((5, 4), (6, 4), (7, 2))]
+    singles = [
+        render_steady(scene, tmp_path, spp=n, spp_per_pass=n, seed=s, quiet=True)[0]
+        for s, n in ((5, 4), (6, 4), (7, 2))
+    ]
     np.testing.assert_allclose(a, (4 * singles[0] + 4 * singles[1] + 2 * singles[2]) / 10, rtol=1e-5, atol=1e-7)
     _, tb = render_steady(scene, tmp_path, spp=1000, spp_per_pass=1, time_budget_s=1e-4, quiet=True)
     assert tb["passes"] == 1 and tb["spp"] == 1  # the first pass always runs; the next would overrun
@@ -320,12 +419,17 @@ def test_passes_seeds_and_budget(tmp_path):
 
 # ---------------------------------------------------------------- the stage
 
+
 def test_run_reference_stage_writes_everything(tmp_path):
     scene_dir, out = tmp_path / "scene", tmp_path / "out"
     cam = Camera(origin=(0.2, 0.1, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30.0, width=12, height=8)
-    make_scene(scene_dir, [SLAB], camera=cam,
-               film=Film(mode="transient", temporal_bins=20, start_opl=3.9, bin_width_opl=0.1),
-               lights=[{"type": "point", "position": [0.0, 0.0, 1.0], "intensity": [5.0, 5.0, 5.0], "medium": None}])
+    make_scene(
+        scene_dir,
+        [SLAB],
+        camera=cam,
+        film=Film(mode="transient", temporal_bins=20, start_opl=3.9, bin_width_opl=0.1),
+        lights=[{"type": "point", "position": [0.0, 0.0, 1.0], "intensity": [5.0, 5.0, 5.0], "medium": None}],
+    )
     cfg = ReferenceConfig(spp=8, transient_spp=8, spp_per_pass=4)
     summary = run_reference_stage(scene_dir, cfg, out, seed=1, quiet=True)
     json.dumps(summary)
@@ -354,6 +458,7 @@ def test_run_reference_stage_writes_everything(tmp_path):
 
 
 # ---------------------------------------------------------------- variants
+
 
 def test_variant_fallback_and_transient_needs_llvm(tmp_path, monkeypatch, caplog):
     real = mi.set_variant

@@ -3,6 +3,7 @@
 Every expected number below is copied from /work/shared/reference/snow_optics.md (the section is
 cited next to each table). Triples are (R, G, B) = (640, 530, 470) nm.
 """
+
 from __future__ import annotations
 
 import math
@@ -40,7 +41,9 @@ def _rel_dev(computed, expected) -> np.ndarray:
 
 def _assert_rel(computed, expected, rel: float, what: str) -> None:
     dev = _rel_dev(computed, expected)
-    assert np.all(dev <= rel), f"{what}: computed {np.asarray(computed)} vs table {np.asarray(expected)}, rel. dev. {dev}"
+    assert np.all(dev <= rel), (
+        f"{what}: computed {np.asarray(computed)} vs table {np.asarray(expected)}, rel. dev. {dev}"
+    )
 
 
 # ------------------------------------------------------------------ section 8: preset table
@@ -50,22 +53,72 @@ def _assert_rel(computed, expected, rel: float, what: str) -> None:
 # transmittance "T(1 m) slab 0.759 / 0.920 / 0.942"; it has no r_d and no ell* ("-").
 # For bubbly ice the r_d column is the bulk (index-matched) value 0.766 / 0.888 / 0.921.
 SECTION_8 = {
-    "fresh_snow": dict(density=100, ssa=60, r_opt=55e-6, sigma_s=3000, sigma_a=(0.042, 0.0082, 0.0039),
-                       g=(0.857, 0.856, 0.854), boundary="null", z_e_cm=(13.6, 30.6, 44.1),
-                       r_d=(0.977, 0.990, 0.993), ell_mm=2.3),
-    "aged_snow": dict(density=350, ssa=15, r_opt=0.22e-3, sigma_s=2625, sigma_a=(0.147, 0.029, 0.014),
-                      g=(0.857, 0.856, 0.854), boundary="null", z_e_cm=(7.8, 17.5, 25.2),
-                      r_d=(0.955, 0.980, 0.986), ell_mm=2.6),
-    "penitente_firn": dict(density=550, ssa=3, r_opt=1.09e-3, sigma_s=825, sigma_a=(0.230, 0.045, 0.022),
-                           g=(0.857, 0.856, 0.854), boundary="null", z_e_cm=(11.1, 24.8, 35.8),
-                           r_d=(0.903, 0.956, 0.969), ell_mm=8.4),
-    "dense_firn": dict(density=800, ssa=1, r_opt=3.3e-3, sigma_s=400, sigma_a=(0.335, 0.066, 0.031),
-                       g=(0.857, 0.856, 0.855), boundary="null", z_e_cm=(13.2, 29.6, 42.7),
-                       r_d=(0.838, 0.925, 0.948), ell_mm=17),
-    "bubbly_ice": dict(density=880, sigma_s=121, sigma_a=(0.230, 0.045, 0.022), g=(0.86, 0.86, 0.86),
-                       boundary="dielectric", z_e_cm=(29, 66, 96), r_d=(0.766, 0.888, 0.921), ell_mm=59),
-    "clear_ice": dict(density=917, sigma_s=0.0, sigma_a=(0.240, 0.047, 0.022), boundary="dielectric",
-                      z_e_cm=(420, 2100, 4500), slab_t_1m=(0.759, 0.920, 0.942)),
+    "fresh_snow": dict(
+        density=100,
+        ssa=60,
+        r_opt=55e-6,
+        sigma_s=3000,
+        sigma_a=(0.042, 0.0082, 0.0039),
+        g=(0.857, 0.856, 0.854),
+        boundary="null",
+        z_e_cm=(13.6, 30.6, 44.1),
+        r_d=(0.977, 0.990, 0.993),
+        ell_mm=2.3,
+    ),
+    "aged_snow": dict(
+        density=350,
+        ssa=15,
+        r_opt=0.22e-3,
+        sigma_s=2625,
+        sigma_a=(0.147, 0.029, 0.014),
+        g=(0.857, 0.856, 0.854),
+        boundary="null",
+        z_e_cm=(7.8, 17.5, 25.2),
+        r_d=(0.955, 0.980, 0.986),
+        ell_mm=2.6,
+    ),
+    "penitente_firn": dict(
+        density=550,
+        ssa=3,
+        r_opt=1.09e-3,
+        sigma_s=825,
+        sigma_a=(0.230, 0.045, 0.022),
+        g=(0.857, 0.856, 0.854),
+        boundary="null",
+        z_e_cm=(11.1, 24.8, 35.8),
+        r_d=(0.903, 0.956, 0.969),
+        ell_mm=8.4,
+    ),
+    "dense_firn": dict(
+        density=800,
+        ssa=1,
+        r_opt=3.3e-3,
+        sigma_s=400,
+        sigma_a=(0.335, 0.066, 0.031),
+        g=(0.857, 0.856, 0.855),
+        boundary="null",
+        z_e_cm=(13.2, 29.6, 42.7),
+        r_d=(0.838, 0.925, 0.948),
+        ell_mm=17,
+    ),
+    "bubbly_ice": dict(
+        density=880,
+        sigma_s=121,
+        sigma_a=(0.230, 0.045, 0.022),
+        g=(0.86, 0.86, 0.86),
+        boundary="dielectric",
+        z_e_cm=(29, 66, 96),
+        r_d=(0.766, 0.888, 0.921),
+        ell_mm=59,
+    ),
+    "clear_ice": dict(
+        density=917,
+        sigma_s=0.0,
+        sigma_a=(0.240, 0.047, 0.022),
+        boundary="dielectric",
+        z_e_cm=(420, 2100, 4500),
+        slab_t_1m=(0.759, 0.920, 0.942),
+    ),
 }
 # §1 / §2 / §8: dielectric boundary n = 1.308 / 1.312 / 1.315 for bubbly and clear ice.
 ICE_IOR = (1.308, 1.312, 1.315)
@@ -128,8 +181,8 @@ def test_clear_ice_slab_transmittance_o5_to_printed_rounding():
 
 def test_ice_constants_section_2():
     assert ALPHA_ICE == (0.240, 0.047, 0.022)  # §2 recommended triple
-    assert N_ICE == ICE_IOR                      # §2 "i.e. (1.308, 1.312, 1.315)"
-    assert RHO_ICE == 917.0                      # §3
+    assert N_ICE == ICE_IOR  # §2 "i.e. (1.308, 1.312, 1.315)"
+    assert RHO_ICE == 917.0  # §3
 
 
 def test_bubbly_ice_section_6():
@@ -160,19 +213,39 @@ SECTION_9_SETS = {
 
 # §9 "Derived quantities as rendered" (scene units), printed strings so the rounding of each entry is known.
 # "as set 1" entries are resolved to set 1's row.
-_AS_RENDERED_1 = dict(sigma_t=("13.23", "9.05", "6.02"), omega=("0.982", "0.995", "0.996"),
-                      sigma_s_red=("1.43", "0.99", "0.66"), z_e=("0.92", "2.6", "4.4"))
+_AS_RENDERED_1 = dict(
+    sigma_t=("13.23", "9.05", "6.02"),
+    omega=("0.982", "0.995", "0.996"),
+    sigma_s_red=("1.43", "0.99", "0.66"),
+    z_e=("0.92", "2.6", "4.4"),
+)
 SECTION_9_AS_RENDERED = {
     1: _AS_RENDERED_1,
-    2: dict(sigma_t=("4.23", "1.55", "0.725"), omega=("0.945", "0.970", "0.966"),
-            sigma_s_red=("0.44", "0.165", "0.077"), z_e=("1.5", "5.8", "11.5")),
-    3: dict(sigma_t=("30.2", "19.0", "8.02"), omega=("0.992", "0.998", "0.997"),
-            sigma_s_red=("3.3", "2.09", "0.88"), z_e=("0.63", "1.8", "3.9")),
-    4: dict(sigma_t=_AS_RENDERED_1["sigma_t"], omega=_AS_RENDERED_1["omega"],
-            sigma_s_red=("2.86", "1.98", "1.32"), z_e=("0.68", "1.9", "3.2")),
+    2: dict(
+        sigma_t=("4.23", "1.55", "0.725"),
+        omega=("0.945", "0.970", "0.966"),
+        sigma_s_red=("0.44", "0.165", "0.077"),
+        z_e=("1.5", "5.8", "11.5"),
+    ),
+    3: dict(
+        sigma_t=("30.2", "19.0", "8.02"),
+        omega=("0.992", "0.998", "0.997"),
+        sigma_s_red=("3.3", "2.09", "0.88"),
+        z_e=("0.63", "1.8", "3.9"),
+    ),
+    4: dict(
+        sigma_t=_AS_RENDERED_1["sigma_t"],
+        omega=_AS_RENDERED_1["omega"],
+        sigma_s_red=("2.86", "1.98", "1.32"),
+        z_e=("0.68", "1.9", "3.2"),
+    ),
     5: _AS_RENDERED_1,
-    6: dict(sigma_t=("9.23", "5.55", "3.38"), omega=("0.975", "0.992", "0.993"),
-            sigma_s_red=("1.17", "0.72", "0.44"), z_e=("1.0", "3.1", "5.4")),
+    6: dict(
+        sigma_t=("9.23", "5.55", "3.38"),
+        omega=("0.975", "0.992", "0.993"),
+        sigma_s_red=("1.17", "0.72", "0.44"),
+        z_e=("1.0", "3.1", "5.4"),
+    ),
 }
 # Two entries of the reference are rounded twice (x -> 3 figures -> 2): set 6 sigma_t(B) = 3.3746 -> 3.375 -> 3.38
 # and set 6 z_e(G) = 1/sqrt(3*0.047081*(0.047081+0.715)) = 3.048 -> 3.05 -> 3.1. For those the band is one unit of
@@ -193,25 +266,27 @@ def test_thesis_set_names():
 def test_thesis_set_literal(k):
     row = SECTION_9_SETS[k]
     optics = thesis_set(k)
-    assert optics.sigma_s == row["sigma_s"]                 # Rozptyl = scattering coefficient, exactly
-    assert optics.sigma_a == THESIS_ABSORPTION              # Absorpce = absorption coefficient, exactly
-    assert optics.g == (row["g"],) * 3                      # "Albedo" column is the HG mean cosine
+    assert optics.sigma_s == row["sigma_s"]  # Rozptyl = scattering coefficient, exactly
+    assert optics.sigma_a == THESIS_ABSORPTION  # Absorpce = absorption coefficient, exactly
+    assert optics.g == (row["g"],) * 3  # "Albedo" column is the HG mean cosine
     assert optics.ior == (row["ior"],) * 3
-    assert optics.boundary == "dielectric"                  # smooth Fresnel dielectric around the snow
+    assert optics.boundary == "dielectric"  # smooth Fresnel dielectric around the snow
     assert optics.region_ior == row["ior"]
     assert optics.form == "full"
     assert optics.inputs["metres_per_unit"] == 1.0
     # The albedo column is not the single-scattering albedo; that is implicit as sigma_s / sigma_t.
     assert optics.single_scattering_albedo == pytest.approx(
-        tuple(s / (s + a) for s, a in zip(row["sigma_s"], THESIS_ABSORPTION)), rel=1e-15)
+        tuple(s / (s + a) for s, a in zip(row["sigma_s"], THESIS_ABSORPTION)), rel=1e-15
+    )
     assert optics.sigma_t == pytest.approx(tuple(s + a for s, a in zip(row["sigma_s"], THESIS_ABSORPTION)), rel=1e-15)
 
 
 @pytest.mark.parametrize("k", list(SECTION_9_AS_RENDERED))
 def test_thesis_set_as_rendered(k):
     d = derived_quantities(thesis_set(k))
-    computed = dict(sigma_t=d.sigma_t, omega=d.single_scattering_albedo, sigma_s_red=d.reduced_scattering,
-                    z_e=d.efolding_depth)
+    computed = dict(
+        sigma_t=d.sigma_t, omega=d.single_scattering_albedo, sigma_s_red=d.reduced_scattering, z_e=d.efolding_depth
+    )
     failures = []
     for quantity, printed in SECTION_9_AS_RENDERED[k].items():
         for ch, text in enumerate(printed):
@@ -250,8 +325,9 @@ def test_thesis_metres_per_unit_keeps_optical_thickness(k, metres_per_unit):
     # A feature L units long is L * metres_per_unit metres: sigma * length is the same in both systems.
     for length_units in (1.0, 85.0, 160.0):  # §9: ~160 units across, ~85 units of relief
         length_m = length_units * metres_per_unit
-        assert np.asarray(per_metre.sigma_t) * length_m == pytest.approx(np.asarray(per_unit.sigma_t) * length_units,
-                                                                          rel=1e-12)
+        assert np.asarray(per_metre.sigma_t) * length_m == pytest.approx(
+            np.asarray(per_unit.sigma_t) * length_units, rel=1e-12
+        )
     assert per_metre.g == per_unit.g and per_metre.ior == per_unit.ior and per_metre.boundary == per_unit.boundary
     assert per_metre.single_scattering_albedo == pytest.approx(per_unit.single_scattering_albedo, rel=1e-14)
     d_u, d_m = derived_quantities(per_unit), derived_quantities(per_metre)
@@ -260,6 +336,7 @@ def test_thesis_metres_per_unit_keeps_optical_thickness(k, metres_per_unit):
 
 
 # ------------------------------------------------------------------ section 8 notes: SSA = 5, density independence
+
 
 def test_penitente_snow_with_ssa_5():
     # §8 notes: "penitente snow with SSA = 5 gives r_d = 0.924 / 0.966 / 0.976 and z_e = 8.6 / 19.2 / 27.8 cm".
@@ -411,6 +488,7 @@ def test_r_d_formula_column_section_4(one_minus_omega, expected):
 
 # ------------------------------------------------------------------ bad inputs
 
+
 @pytest.mark.parametrize("density", [-550.0, 0.0, RHO_ICE, 1000.0])
 def test_snow_density_out_of_range(density):
     with pytest.raises(ValueError, match="density"):
@@ -486,6 +564,7 @@ def test_negative_coefficients_rejected():
 
 
 # ------------------------------------------------------------------ sections 2/3: TARTES g
+
 
 def test_tartes_g_penitente_snow_visible():
     # §3: "In the visible this gives g = 0.857 / 0.856 / 0.854" (penitente snow, r_opt = 1.09 mm).

@@ -1,5 +1,6 @@
 """The scene stage: media resolved from presets, meshes placed and checked, the camera framing its
 objects, the sun from the site's sun path, and the auto time window against analytic arrivals."""
+
 from __future__ import annotations
 
 import json
@@ -9,7 +10,13 @@ import numpy as np
 import pytest
 
 from pipeline.schema.scene import (
-    CameraConfig, FilmConfig, MediumConfig, ObjectConfig, SceneConfig, SkyConfig, SunConfig,
+    CameraConfig,
+    FilmConfig,
+    MediumConfig,
+    ObjectConfig,
+    SceneConfig,
+    SkyConfig,
+    SunConfig,
 )
 from render import optics
 from render.ply import write_ply
@@ -22,8 +29,9 @@ def box_scene(**overrides) -> SceneConfig:
     fields = dict(
         media={"snow": MediumConfig(preset="penitente_firn")},
         objects=[ObjectConfig(name="block", shape="box", medium="snow", center=(0, 0, -0.5), size=(2, 2, 1))],
-        camera=CameraConfig(placement="look_at", origin=(0, 0, 5), target=(0, 0, 0), up=(0, 1, 0), width=32,
-                            height=24, fov=40),
+        camera=CameraConfig(
+            placement="look_at", origin=(0, 0, 5), target=(0, 0, 0), up=(0, 1, 0), width=32, height=24, fov=40
+        ),
         sun=SunConfig(direction=(0, 0, 1), kind="directional"),
         sky=SkyConfig(radiance=0.0),
         film=FilmConfig(mode="transient", temporal_bins=10, window="auto", window_tail_opl=0.0),
@@ -47,8 +55,9 @@ def test_media_take_the_render_form_their_kind_calls_for():
     full = optics.load_preset("penitente_firn")
     # Diffraction removed by default for grains: sigma_s halves, g_G = 2g - 1, sigma_s (1 - g) kept.
     np.testing.assert_allclose(snow.sigma_s, np.asarray(full.sigma_s) / 2)
-    np.testing.assert_allclose(np.asarray(snow.sigma_s) * (1 - np.asarray(snow.g)),
-                               np.asarray(full.sigma_s) * (1 - np.asarray(full.g)))
+    np.testing.assert_allclose(
+        np.asarray(snow.sigma_s) * (1 - np.asarray(snow.g)), np.asarray(full.sigma_s) * (1 - np.asarray(full.g))
+    )
     assert snow.boundary == "null" and snow.region_ior == 1.0
     thesis = medium_optics(MediumConfig(preset="thesis_set_6"), "t")
     assert thesis.sigma_s == (9.0, 5.5, 3.35) and thesis.g == (0.87,) * 3 and thesis.boundary == "dielectric"
@@ -127,8 +136,9 @@ def test_a_mesh_that_is_not_watertight_is_refused_with_its_name(tmp_path):
     with pytest.raises(ValueError, match="object 'broken'.*not a closed manifold"):
         build_scene(cfg, tmp_path / "out")
     write_ply(tmp_path / "inside_out.ply", v, f[:, ::-1])
-    cfg = box_scene(objects=[ObjectConfig(name="flipped", shape="ply", path=str(tmp_path / "inside_out.ply"),
-                                          medium="snow")])
+    cfg = box_scene(
+        objects=[ObjectConfig(name="flipped", shape="ply", path=str(tmp_path / "inside_out.ply"), medium="snow")]
+    )
     with pytest.raises(ValueError, match="object 'flipped'.*flip its faces"):
         build_scene(cfg, tmp_path / "out")
 

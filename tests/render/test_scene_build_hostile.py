@@ -1,12 +1,20 @@
 """Hostile meshes through the scene stage: each is refused with a reason that names its object, or
 builds a scene that renders with finite values."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from pipeline.schema.scene import (
-    CameraConfig, CoefficientsConfig, FilmConfig, MediumConfig, ObjectConfig, SceneConfig, SkyConfig, SunConfig,
+    CameraConfig,
+    CoefficientsConfig,
+    FilmConfig,
+    MediumConfig,
+    ObjectConfig,
+    SceneConfig,
+    SkyConfig,
+    SunConfig,
 )
 from render.ply import write_ply
 from render.ptpb import render
@@ -17,10 +25,13 @@ from render.shapes import box_mesh
 
 def ply_scene(path) -> SceneConfig:
     return SceneConfig(
-        media={"snow": MediumConfig(coefficients=CoefficientsConfig(sigma_s=(3.0, 2.5, 2.0), sigma_a=(0.3, 0.1, 0.05)))},
+        media={
+            "snow": MediumConfig(coefficients=CoefficientsConfig(sigma_s=(3.0, 2.5, 2.0), sigma_a=(0.3, 0.1, 0.05)))
+        },
         objects=[ObjectConfig(name="hostile", shape="ply", path=str(path), medium="snow")],
-        camera=CameraConfig(placement="look_at", origin=(0, -3, 2), target=(0, 0, 0), up=(0, 0, 1), width=12,
-                            height=8, fov=45),
+        camera=CameraConfig(
+            placement="look_at", origin=(0, -3, 2), target=(0, 0, 0), up=(0, 0, 1), width=12, height=8, fov=45
+        ),
         sun=SunConfig(direction=(0.3, -0.2, 1.0), kind="directional", irradiance=100.0),
         sky=SkyConfig(radiance=0.0),
         film=FilmConfig(mode="transient", temporal_bins=6, window="auto", window_tail_opl=0.5),
@@ -48,7 +59,10 @@ def inf_box():
 
 REFUSED = {
     "empty": ((np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint32)), "the mesh is empty"),
-    "fin": (box_with([[2, 2, 2]], [[0, 1, 8]]), r"not a closed manifold \(NotManifold\)"),  # an extra triangle on an edge
+    "fin": (
+        box_with([[2, 2, 2]], [[0, 1, 8]]),
+        r"not a closed manifold \(NotManifold\)",
+    ),  # an extra triangle on an edge
     "nan": (nan_box(), "NaN or infinite vertices"),
     "inf": (inf_box(), "NaN or infinite vertices"),
     # A zero-area triangle with three distinct vertices (one on the edge 0-1) makes that edge non-manifold.
@@ -84,7 +98,16 @@ def test_degenerate_triangles_that_keep_the_mesh_closed_build_and_render_finite(
     write_ply(tmp_path / "mesh.ply", v, f)
     run_scene_stage(ply_scene(tmp_path / "mesh.ply"), tmp_path / "scene")
     scene = load_core_scene(tmp_path / "scene")
-    result = render(scene, {"iterations": 2, "light_paths_per_iteration": 2000, "initial_beam_radius": 0.05,
-                            "max_depth": 16, "seed": 1, "threads": 2})
+    result = render(
+        scene,
+        {
+            "iterations": 2,
+            "light_paths_per_iteration": 2000,
+            "initial_beam_radius": 0.05,
+            "max_depth": 16,
+            "seed": 1,
+            "threads": 2,
+        },
+    )
     assert np.isfinite(result.steady).all() and np.isfinite(result.frames).all()
     assert result.steady.sum() > 0

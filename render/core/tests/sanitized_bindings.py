@@ -9,6 +9,7 @@ the ASan runtime must come first (LD_PRELOAD), libstdc++ with it (otherwise ASan
 real __cxa_throw and aborts on the first C++ exception), and leak checking stays off (CPython
 keeps its objects alive at exit on purpose).
 """
+
 from __future__ import annotations
 
 import importlib.util
