@@ -137,7 +137,7 @@ class PathTracerCurve:
 def ours_transient(core: dict, cfg, error: FrameError, iterations: int, every: int):
     """Bins-mode render; per-frame relMSE every ``every`` iterations (checkpoint callback, its own
     time taken out of the curve)."""
-    from render.ptpb import render
+    from render.ptpb.api import render
 
     points, spent = [], [0.0]
 
@@ -164,7 +164,7 @@ def ours_transient(core: dict, cfg, error: FrameError, iterations: int, every: i
 
 
 def ours_steady(core: dict, cfg, error: FrameError, iterations: int, every: int):
-    from render.ptpb import render
+    from render.ptpb.api import render
 
     scene = {**core, "film": {**core["film"], "frame_mode": "steady"}}
     settings = cfg.model_validate(
@@ -187,8 +187,8 @@ def path_tracer(scene_dir: Path, error: FrameError, integrator: str, passes: int
     that compiles the kernels."""
     import mitsuba as mi
 
-    from render.mitsuba_ref import scene_to_mitsuba, use_variant
-    from render.scene import Scene
+    from render.mitsuba.export import scene_to_mitsuba, use_variant
+    from render.scene.model import Scene
 
     transient = integrator == "transient_prbvolpath"
     use_variant(transient=transient)
@@ -225,7 +225,7 @@ def path_tracer(scene_dir: Path, error: FrameError, integrator: str, passes: int
 def one_pass_against_many(core: dict, cfg, iterations: int, paths: int):
     """T gate frames in one pass against T renders of one gate each (temporal_bins = 1 centred on
     frame k, the same R_0, T_0, M and iterations); returns times and the largest frame difference."""
-    from render.ptpb import render
+    from render.ptpb.api import render
 
     film = core["film"]
     frames = film["temporal_bins"]
@@ -262,7 +262,7 @@ def one_pass_against_many(core: dict, cfg, iterations: int, paths: int):
 def scaling(core: dict, cfg, iterations: int, repeats: int):
     """Best wall time of ``repeats`` renders at 1 and THREADS threads (alternating), the process CPU
     time of that render, and the images' digests."""
-    from render.ptpb import render
+    from render.ptpb.api import render
 
     best, cpu, hashes = {}, {}, {}
     for _ in range(repeats):
@@ -301,8 +301,8 @@ def memory_worker(spec: dict) -> None:
     """Runs in its own process: one render, then prints its peak RSS against frames + beams."""
     import psutil
 
-    from render.ptpb import render
-    from render.ptpb_stage import load_core_scene
+    from render.ptpb.api import render
+    from render.ptpb.stage import load_core_scene
 
     cfg = load_config(CONFIG)
     core = load_core_scene(bench_scene(cfg))
@@ -315,7 +315,7 @@ def memory_worker(spec: dict) -> None:
     }
     settings = cfg.render.model_validate(
         {
-            **cfg.render.model_dump(),
+            **cfg.render_settings().model_dump(),
             "iterations": spec["iterations"],
             "light_paths_per_iteration": spec["paths"],
             "threads": THREADS,
@@ -496,7 +496,7 @@ def main() -> None:
         memory_worker(json.loads(args.memory_worker))
         return
 
-    from render.ptpb_stage import load_core_scene
+    from render.ptpb.stage import load_core_scene
 
     quick = args.quick
     started = time.perf_counter()
@@ -505,7 +505,7 @@ def main() -> None:
     scene_dir = bench_scene(config)
     ref = reference(scene_dir, config.reference)
     core = load_core_scene(scene_dir)
-    cfg = config.render
+    cfg = config.render_settings()  # the render section with the scene's path depth, as the pipeline renders
     frames_error, steady_error = ref.frame_error(), ref.steady_error()
     film = core["film"]
     cam = core["camera"]

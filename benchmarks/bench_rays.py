@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.atomic import write_text_atomic
-from render.raytrace import RayEngine
+from render.ptpb.raytrace import RayEngine
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from pipeline.atomic import atomic_path
 from pipeline.config import config_hash
-from render.metrics import RELMSE_EPSILON
+from render.output.metrics import RELMSE_EPSILON
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "benchmarks" / "results"
@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 def bench_scene(config) -> Path:
     """The scene folder of ``config`` (the scene stage), built on the first call and cached by the
     config's scene section, its seed and the mesh files it names."""
-    from render.scene_build import run_scene_stage
+    from render.scene.stage import run_scene_stage
 
     h = hashlib.sha256(config_hash(config, ["scene", "seed"]).encode())
     for obj in config.scene.objects:
@@ -81,8 +81,9 @@ def reference(scene_dir: Path, cfg) -> Reference:
     """mitransient at ``cfg.transient_spp`` (two halves), cached; ``cfg`` is the config's reference section."""
     import mitsuba
 
-    from render.mitsuba_ref import render_transient, use_variant
-    from render.scene import Scene
+    from render.mitsuba.export import use_variant
+    from render.mitsuba.passes import render_transient
+    from render.scene.model import Scene
 
     use_variant(transient=True)
     import mitransient
@@ -132,7 +133,7 @@ def reference(scene_dir: Path, cfg) -> Reference:
 class FrameError:
     """relMSE of renders against a two-half reference, with the reference's own noise taken out.
 
-    relMSE(x) = mean over frames, pixels and channels of (x - r)^2 / (r^2 + 1e-2) (render/metrics.py),
+    relMSE(x) = mean over frames, pixels and channels of (x - r)^2 / (r^2 + 1e-2) (render/output/metrics.py),
     with r the mean of the halves a and b. Since x and r are independent, its expectation is the error
     of x plus the reference's variance term, estimated as mean((a - b)^2 / (r^2 + 1e-2)) / 4; the
     corrected figure subtracts it. Frames are equal in size, so the mean over all values is the mean of

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from geometry import meshio
+
 
 @dataclass(frozen=True)
 class TriangleMesh:
@@ -125,14 +127,10 @@ def decimate(mesh: TriangleMesh, max_triangles: int) -> TriangleMesh:
 
 def write_ply(path: str | Path, mesh: TriangleMesh, comment: str = "") -> Path:
     """Write a binary little-endian PLY (float32 vertices, uint8 + int32 faces), atomically."""
-    from render import ply
-
-    return ply.write_ply(path, mesh.vertices, mesh.faces, comment)
+    return meshio.write_ply(path, mesh.vertices, mesh.faces, comment)
 
 
 def read_ply(path: str | Path) -> TriangleMesh:
-    """Read a binary little-endian triangle PLY, such as one written by ``write_ply``."""
-    from render import ply
-
-    vertices, faces = ply.read_ply(path)
+    """Read a triangle mesh file (PLY, OBJ or STL; geometry/meshio.py)."""
+    vertices, faces = meshio.read_mesh(path)
     return TriangleMesh(vertices.astype(float), faces.astype(np.int64))

@@ -119,7 +119,7 @@ def apply_overrides(raw: dict[str, Any], assignments: Iterable[str]) -> dict[str
 
 
 def format_key_path(parts) -> str:
-    """``render.ptpb.initial_radius``; odd keys (spaces, dots, empty) are quoted so they stay visible."""
+    """``render.ptpb.api.initial_radius``; odd keys (spaces, dots, empty) are quoted so they stay visible."""
     shown = [str(p) if isinstance(p, int) or re.fullmatch(r"[A-Za-z0-9_-]+", str(p)) else repr(str(p)) for p in parts]
     return ".".join(shown) or "(top level)"
 
@@ -138,7 +138,7 @@ def format_validation_error(error: ValidationError, source: str) -> str:
         value_text = repr(value) if not isinstance(value, dict) else "a mapping"
         if len(value_text) > 80:
             value_text = value_text[:77] + "..."
-        lines.append(f"  {key_path}: value {value_text} is not allowed: {item['msg']}")
+        lines.append(f"  {key_path}: value {value_text} is not allowed: {item['msg'].removeprefix('Value error, ')}")
     return "\n".join(lines)
 
 

@@ -7,4 +7,10 @@ from pathlib import Path
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 CONFIGS_DIR = PROJECT_ROOT / "configs"
 PRESETS_DIR = CONFIGS_DIR / "presets"
+OPTICS_PRESETS_DIR = PRESETS_DIR / "optics"
 DEFAULT_RUNS_DIR = Path("runs")
+
+
+def optics_preset_names() -> list[str]:
+    """The optical presets a medium may name: the stems of ``configs/presets/optics/*.yaml``."""
+    return sorted(p.stem for p in OPTICS_PRESETS_DIR.glob("*.yaml"))

@@ -6,8 +6,6 @@ Heavy modules are imported inside the functions so that `python -m pipeline vali
 
 from __future__ import annotations
 
-import json
-
 from pipeline.runner import Stage, StageContext
 
 
@@ -22,7 +20,7 @@ def _uses_penitentes(config) -> bool:
 
 
 def scene_stage(ctx: StageContext) -> dict:
-    from render.scene_build import run_scene_stage
+    from render.scene.stage import run_scene_stage
 
     g = ctx.config.geometry
     site = {"latitude": g.latitude, "day_of_year": g.start_day_of_year + g.days - 1}
@@ -30,7 +28,7 @@ def scene_stage(ctx: StageContext) -> dict:
 
 
 def reference_stage(ctx: StageContext) -> dict:
-    from render.mitsuba_ref import run_reference_stage
+    from render.mitsuba.stage import run_reference_stage
 
     return run_reference_stage(
         ctx.inputs["scene"], ctx.config.reference, ctx.out_dir, seed=ctx.config.seed, quiet=ctx.quiet
@@ -38,21 +36,19 @@ def reference_stage(ctx: StageContext) -> dict:
 
 
 def render_stage(ctx: StageContext) -> dict:
-    from render.ptpb_stage import run_render_stage
+    from render.ptpb.stage import run_render_stage
 
     return run_render_stage(
         ctx.inputs["scene"],
-        ctx.config.render,
+        ctx.config.render_settings(),
         ctx.out_dir,
-        seed=ctx.config.seed,
-        threads=ctx.config.threads,
         quiet=ctx.quiet,
         checkpoint_dir=ctx.checkpoint_dir,
     )
 
 
 def composite_stage(ctx: StageContext) -> dict:
-    from render.composite import run_composite_stage
+    from render.output.composite import run_composite_stage
 
     return run_composite_stage(
         ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"], ctx.config.composite, ctx.out_dir
@@ -60,17 +56,13 @@ def composite_stage(ctx: StageContext) -> dict:
 
 
 def compare_stage(ctx: StageContext) -> dict:
-    from render.compare import run_compare_stage
-    from render.composite import Film
+    from render.output.compare import run_compare_stage
 
-    stats = json.loads((ctx.inputs["render"] / "stats.json").read_text())
-    film = Film(stats["start_opl_m"], stats["bin_width_opl_m"], stats["frame_mode"])
     run_root = ctx.out_dir.parent
     return run_compare_stage(
         run_root,
         ctx.inputs["render"],
         ctx.inputs.get("reference"),
-        film,
         ctx.out_dir,
         [s.name for s in STAGES],
         f"Run '{ctx.config.name}'",
@@ -103,7 +95,7 @@ STAGES: list[Stage] = [
     Stage(
         "render",
         render_stage,
-        ("render", "seed", "threads"),
+        ("render", "seed", "threads", "scene.max_depth", "scene.rr_depth"),
         upstream=("scene",),
         description="our PTPB render: steady image, frames and statistics",
     ),

@@ -25,21 +25,17 @@ stage runner's manifests skip the stages whose inputs did not change.
 instead of against its own (equal-time comparisons). In the error-against-time plot a point that
 renders its own reference then stands for the reference renderer, any other point for ours.
 
-``python -m pipeline.sweep summarize runs/sweeps/<sweep>/workflow.yaml`` writes the sweep summary:
+``python -m render.output.summary runs/sweeps/<sweep>/workflow.yaml`` writes the sweep summary
 the table (CSV, Markdown, HTML), the poster grid, the error-against-time plot and ``report.html``.
 """
 
 from __future__ import annotations
 
-import csv
 import difflib
-import html
 import importlib.util
-import io
 import itertools
 import json
 import logging
-import os
 import re
 import subprocess
 import sys
@@ -361,6 +357,40 @@ def target_stage(sweep: Sweep) -> str:
     return enabled[-1]
 
 
+def _overrides_for_people(assignments: list[str]) -> list[tuple[str, str]]:
+    """``("scene.media.snow.preset", "thesis_set_1")`` for ``scene.media.snow.preset="thesis_set_1"``."""
+    pairs = []
+    for assignment in assignments:
+        keys, value = parse_override(assignment)
+        pairs.append((".".join(keys), value if isinstance(value, str) else json.dumps(value)))
+    return pairs
+
+
+def _input_value(dump: dict, key: str) -> Any:
+    """The point's resolved value of a dotted key, for the table (text unless a number)."""
+    try:
+        value = subtree(dump, key)
+    except (KeyError, TypeError):
+        return None
+    if value is None or isinstance(value, str) or (isinstance(value, (int, float)) and not isinstance(value, bool)):
+        return value
+    return json.dumps(value)
+
+
+def _point_spec(point: SweepPoint, input_keys: list[str]) -> dict[str, Any]:
+    """What the summary needs of a point, resolved here so that it reads files only."""
+    from pipeline.stages import STAGES
+
+    dump = point.config.model_dump(mode="json")
+    return {
+        "overrides": list(point.overrides),
+        "override_pairs": [list(pair) for pair in _overrides_for_people(list(point.overrides))],
+        "description": point.description,
+        "stages": [s.name for s in STAGES if s.enabled(point.config)],
+        "inputs": {key: _input_value(dump, key) for key in input_keys},
+    }
+
+
 def prepare(sweep: Sweep, workdir: Path | None = None) -> Path:
     """Write the point configs and the workflow's config file; return the latter's path."""
     workdir = (workdir or Path.cwd()).resolve()
@@ -376,6 +406,7 @@ def prepare(sweep: Sweep, workdir: Path | None = None) -> Path:
     for stale in (folder / "points").glob("*.yaml"):
         if stale.stem not in names:  # a point removed from the sweep file; its run folder stays
             stale.unlink()
+    input_keys = list(dict.fromkeys(key for p in sweep.points for key, _ in _overrides_for_people(list(p.overrides))))
     spec = {
         "sweep": sweep.name,
         "sweep_file": str(sweep.path.resolve()),
@@ -388,7 +419,8 @@ def prepare(sweep: Sweep, workdir: Path | None = None) -> Path:
         "target_stage": target_stage(sweep),
         "ground_truth": sweep.ground_truth,
         "common": list(sweep.common),
-        "points": {p.name: {"overrides": list(p.overrides), "description": p.description} for p in sweep.points},
+        "common_pairs": [list(pair) for pair in _overrides_for_people(list(sweep.common))],
+        "points": {p.name: _point_spec(p, input_keys) for p in sweep.points},
     }
     workflow_yaml = folder / "workflow.yaml"
     write_if_changed(
@@ -456,428 +488,3 @@ def run_sweep(
     command = snakemake_command(workflow_yaml, cores, profile, dry_run, extra)
     log.info("running %s", " ".join(command))
     return subprocess.run(command, check=False).returncode
-
-
-# ---------------------------------------------------------------- summary
-
-
-@dataclass
-class _PointFiles:
-    """Reads a point's stage outputs; a missing file of an enabled stage logs a warning and gives None."""
-
-    name: str
-    run_dir: Path
-    enabled: set[str]
-
-    def path(self, stage: str, name: str) -> Path | None:
-        if stage not in self.enabled:
-            return None
-        path = self.run_dir / stage / name
-        if not path.is_file():
-            log.warning("sweep summary: point '%s': %s is missing; its cells stay empty", self.name, path)
-            return None
-        return path
-
-    def read_json(self, stage: str, name: str) -> dict:
-        path = self.path(stage, name)
-        if path is None:
-            return {}
-        try:
-            return json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            log.warning("sweep summary: point '%s': cannot read %s (%s); its cells stay empty", self.name, path, exc)
-            return {}
-
-    def read_array(self, stage: str, name: str):
-        import numpy as np
-
-        path = self.path(stage, name)
-        if path is None:
-            return None
-        try:
-            return np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            log.warning("sweep summary: point '%s': cannot read %s (%s)", self.name, path, exc)
-            return None
-
-
-def _number(value: Any) -> float | None:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        return None
-    return number if number == number and abs(number) != float("inf") else None
-
-
-def _compare_errors(files: _PointFiles) -> dict[str, float | None]:
-    """relMSE of ours (steady, frames) against the point's own reference, from compare/comparison.csv."""
-    errors = {"relmse_steady": None, "relmse_frames": None}
-    path = files.path("compare", "comparison.csv")
-    if path is None:
-        return errors
-    with open(path, newline="", encoding="utf-8") as handle:
-        for row in csv.DictReader(handle):
-            if not row.get("renderer", "").startswith("ours"):
-                continue
-            key = "relmse_steady" if row.get("quantity") == "steady" else "relmse_frames"
-            errors[key] = _number(row.get("relmse"))
-    return errors
-
-
-def _relmse(estimate, reference, what: str, point: str) -> float | None:
-    from render.metrics import relmse
-
-    if estimate is None or reference is None:
-        return None
-    if estimate.shape != reference.shape:
-        log.warning(
-            "sweep summary: point '%s': %s has shape %s, the ground truth %s; no error computed",
-            point,
-            what,
-            estimate.shape,
-            reference.shape,
-        )
-        return None
-    return relmse(estimate, reference)
-
-
-def _frames_as_bins(frames, stats: dict):
-    # Gate frames are densities per metre of OPL; times the bin width they compare with bins (as render/compare.py).
-    if frames is None or stats.get("frame_mode") != "gate" or not stats.get("bin_width_opl_m"):
-        return frames
-    return frames * stats["bin_width_opl_m"]
-
-
-def _triple_columns(prefix: str, values) -> dict[str, float | None]:
-    values = values if isinstance(values, (list, tuple)) and len(values) == 3 else [None] * 3
-    return {f"{prefix}_{channel}": _number(v) for channel, v in zip("rgb", values)}
-
-
-def _input_value(dump: dict, key: str) -> Any:
-    """The point's resolved value of a dotted key, for the table (text unless a number)."""
-    try:
-        value = subtree(dump, key)
-    except (KeyError, TypeError):
-        return None
-    if value is None or isinstance(value, str) or (isinstance(value, (int, float)) and not isinstance(value, bool)):
-        return value
-    return json.dumps(value)
-
-
-def _point_row(
-    spec: dict, name: str, input_keys: list[str], truth: dict | None
-) -> tuple[dict[str, Any], _PointFiles, dict]:
-    """One row: the point's inputs (every key some point overrides), times, errors, albedo, optics."""
-    from pipeline.config import load_config
-    from pipeline.stages import STAGES
-
-    run_dir = Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}"
-    try:
-        config = load_config(Path(spec["folder"]) / "points" / f"{name}.yaml")
-        enabled, dump = {s.name for s in STAGES if s.enabled(config)}, config.model_dump(mode="json")
-    except ConfigError as exc:
-        log.warning("sweep summary: point '%s': its config no longer loads (%s); reading what is there", name, exc)
-        enabled, dump = {s.name for s in STAGES}, {}
-    files = _PointFiles(name, run_dir, enabled)
-    row: dict[str, Any] = {"point": name, **{key: _input_value(dump, key) for key in input_keys}}
-    stats = files.read_json("render", "stats.json")
-    timing = files.read_json("reference", "timing.json")
-    steady_timing, transient_timing = timing.get("steady") or {}, timing.get("transient") or {}
-    row.update(
-        {
-            "frame_mode": stats.get("frame_mode"),
-            "render_s": _number(stats.get("time_total_s", stats.get("seconds"))),
-            "iterations": stats.get("iterations"),
-        }
-    )
-    extras = {"steady_timing": steady_timing, "transient_timing": transient_timing}
-    row["reference_steady_s"] = _number(steady_timing.get("seconds"))
-    row["reference_transient_s"] = _number(transient_timing.get("seconds"))
-    if truth is None:
-        row.update(_compare_errors(files))
-    else:
-        ours_steady, ours_frames = files.read_array("render", "steady.npy"), files.read_array("render", "frames.npy")
-        row["relmse_steady"] = _relmse(ours_steady, truth["steady"], "render/steady.npy", name)
-        row["relmse_frames"] = _relmse(_frames_as_bins(ours_frames, stats), truth["frames"], "render/frames.npy", name)
-        row["reference_relmse_steady"] = row["reference_relmse_frames"] = None
-        if name != spec["ground_truth"]:
-            own_steady = files.read_array("reference", "steady.npy") if steady_timing else None
-            own_frames = files.read_array("reference", "frames.npy") if transient_timing else None
-            row["reference_relmse_steady"] = _relmse(own_steady, truth["steady"], "reference/steady.npy", name)
-            row["reference_relmse_frames"] = _relmse(own_frames, truth["frames"], "reference/frames.npy", name)
-    metrics = files.read_json("geometry", "metrics.json").get("metrics", {})
-    row["field_albedo"] = _number(metrics.get("field_albedo"))
-    for medium, entry in files.read_json("scene", "optics.json").items():
-        derived = entry.get("derived", {}) if isinstance(entry, dict) else {}
-        row.update(_triple_columns(f"{medium}_diffuse_albedo", derived.get("diffuse_albedo")))
-        row.update(_triple_columns(f"{medium}_efolding_depth_m", derived.get("efolding_depth")))
-    return row, files, extras
-
-
-def _overrides_for_people(assignments: list[str]) -> list[tuple[str, str]]:
-    """``("scene.media.snow.preset", "thesis_set_1")`` for ``scene.media.snow.preset="thesis_set_1"``."""
-    pairs = []
-    for assignment in assignments:
-        keys, value = parse_override(assignment)
-        pairs.append((".".join(keys), value if isinstance(value, str) else json.dumps(value)))
-    return pairs
-
-
-def _format_cell(value: Any, markdown: bool) -> str:
-    if value is None:
-        return ""
-    text = f"{value:.4g}" if isinstance(value, float) else str(value)
-    return text.replace("|", "/") if markdown else text
-
-
-def write_table(rows: list[dict[str, Any]], folder: Path, title: str) -> dict[str, Path]:
-    """summary.csv, summary.md and summary.html: one row per point, the union of the rows' columns."""
-    from render.report import STYLE, markdown_table_to_html
-
-    columns: list[str] = []
-    for row in rows:
-        columns += [c for c in row if c not in columns]
-    md_lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    md_lines += ["| " + " | ".join(_format_cell(r.get(c), True) for c in columns) + " |" for r in rows]
-    markdown = "\n".join(md_lines) + "\n"
-    paths = {"md": folder / "summary.md", "csv": folder / "summary.csv", "html": folder / "summary.html"}
-    write_text_atomic(paths["md"], markdown)
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(columns)
-    # Full precision in the CSV; four digits for people in Markdown and HTML.
-    writer.writerows(
-        [["" if r.get(c) is None else repr(r[c]) if isinstance(r[c], float) else r[c] for c in columns] for r in rows]
-    )
-    write_text_atomic(paths["csv"], buffer.getvalue())
-    write_text_atomic(paths["html"], _page(title, STYLE, markdown_table_to_html(markdown)))
-    return paths
-
-
-def _page(title: str, style: str, body: str) -> str:
-    return (
-        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-        f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n"
-    )
-
-
-def _sigma_label(key: str, entry: dict) -> str:
-    """One poster line per medium: its rendered sigma_s and sigma_a (R, G, B) in 1/m."""
-    medium = entry.get("medium", {})
-    if "sigma_s" not in medium:
-        return ""
-    triple = lambda values: "/".join(f"{v:.3g}" for v in values)  # noqa: E731
-    return f"\n{key} σs {triple(medium['sigma_s'])} /m\nσa {triple(medium['sigma_a'])} /m"
-
-
-def write_poster(points: list[tuple[str, Any, str]], path: Path, title: str) -> None:
-    """The poster grid of our steady renders; points whose image shape differs from the first are left out."""
-    from render.figures import poster_grid
-
-    images = [(name, image, label) for name, image, label in points if image is not None]
-    if images:
-        shape = images[0][1].shape
-        for name, image, _ in images:
-            if image.shape != shape:
-                log.warning(
-                    "sweep summary: point '%s': its render is %s, not %s; left out of the poster",
-                    name,
-                    image.shape,
-                    shape,
-                )
-        images = [item for item in images if item[1].shape == shape]
-    if not images:
-        log.warning("sweep summary: no steady render found; the poster is a placeholder")
-        import matplotlib.pyplot as plt
-
-        from pipeline.atomic import atomic_path
-
-        fig = plt.figure(figsize=(4, 1))
-        fig.text(0.5, 0.5, "no steady render found", ha="center", va="center")
-        for target in (path, path.with_suffix(".pdf")):
-            with atomic_path(target) as tmp:
-                fig.savefig(tmp)
-        plt.close(fig)
-        return
-    poster_grid(
-        [i for _, i, _ in images], [label for _, _, label in images], path, columns=min(4, len(images)), title=title
-    )
-
-
-def _error_series(
-    spec: dict, rows: list[dict], extras: dict[str, dict], files: dict[str, _PointFiles], truth: dict | None
-) -> dict[str, list[dict[str, float]]]:
-    """With a ground truth: one line per method across points; without: each point's convergence
-    (its steady snapshots against its own steady reference)."""
-    import numpy as np
-
-    from render.metrics import relmse
-
-    series: dict[str, list[dict[str, float]]] = {}
-
-    def add(label, seconds, count, error):
-        if seconds and count and error:
-            series.setdefault(label, []).append({"seconds": seconds, "iterations": count, "relmse": error})
-
-    if truth is not None:
-        for row in rows:
-            extra = extras[row["point"]]
-            if row["point"] == spec["ground_truth"]:
-                continue
-            if extra["steady_timing"] or extra["transient_timing"]:
-                # A point that renders its own reference measures the reference renderer.
-                add(
-                    "mitransient, frames",
-                    row.get("reference_transient_s"),
-                    extra["transient_timing"].get("spp"),
-                    row.get("reference_relmse_frames"),
-                )
-                add(
-                    "Mitsuba volpath, steady",
-                    row.get("reference_steady_s"),
-                    extra["steady_timing"].get("spp"),
-                    row.get("reference_relmse_steady"),
-                )
-                continue
-            mode = row.get("frame_mode") or "?"
-            add(f"ours ({mode}), frames", row.get("render_s"), row.get("iterations"), row.get("relmse_frames"))
-            add(f"ours ({mode}), steady", row.get("render_s"), row.get("iterations"), row.get("relmse_steady"))
-        for points in series.values():
-            points.sort(key=lambda p: p["seconds"])
-        return series
-    for row in rows:
-        point_files = files[row["point"]]
-        reference = point_files.read_array("reference", "steady.npy") if extras[row["point"]]["steady_timing"] else None
-        snapshots = point_files.run_dir / "render" / "snapshots.npz"
-        if reference is None or not snapshots.is_file():
-            continue
-        with np.load(snapshots) as z:
-            for iterations, seconds, image in zip(z["iterations"], z["seconds"], z["steady"]):
-                if image.shape == reference.shape:
-                    add(row["point"], float(seconds), int(iterations), relmse(image, reference))
-    return series
-
-
-def _report(spec: dict, rows: list[dict], table_md: Path, folder: Path, has_error_plot: bool) -> str:
-    from render.report import STYLE, markdown_table_to_html
-
-    rel = lambda p: html.escape(os.path.relpath(p, folder))  # noqa: E731
-    truth = spec.get("ground_truth")
-    against = f"the reference renders of point '{truth}'" if truth else "each point's own reference"
-    parts = []
-    if spec.get("description"):
-        parts.append(f"<p>{html.escape(spec['description'])}</p>")
-    parts.append(
-        f"<p>Sweep file <code>{html.escape(spec['sweep_file'])}</code>; {len(rows)} points; "
-        f"errors (relMSE) are against {html.escape(against)}. "
-        f"Regenerate with <code>python -m pipeline sweep {html.escape(spec['sweep_file'])}</code>.</p>"
-    )
-    if spec.get("common"):
-        parts.append(
-            "<p>Every point sets: "
-            + ", ".join(
-                f"<code>{html.escape(key)}={html.escape(value)}</code>"
-                for key, value in _overrides_for_people(spec["common"])
-            )
-            + "</p>"
-        )
-    parts.append(
-        "<h2>Summary</h2><div style='overflow-x: auto'>"
-        + markdown_table_to_html(table_md.read_text(encoding="utf-8"))
-        + "</div>"
-    )
-    parts.append(
-        "<p>" + " · ".join(f'<a href="{n}">{n}</a>' for n in ("summary.csv", "summary.md", "summary.html")) + "</p>"
-    )
-    parts.append(
-        '<h2>Poster</h2><figure><a href="poster.pdf"><img src="poster.png" alt="poster grid"></a>'
-        "<figcaption>ours, steady, one exposure for all points</figcaption></figure>"
-    )
-    if has_error_plot:
-        parts.append(
-            '<h2>Error against time</h2><figure><a href="error_vs_time.pdf">'
-            '<img src="error_vs_time.png" alt="error against time"></a></figure>'
-        )
-    items = []
-    for row in rows:
-        name = row["point"]
-        run = Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}"
-        links = [
-            f'<a href="{rel(run / "compare" / "report.html")}">run report</a>',
-            f'<a href="{rel(folder / "points" / f"{name}.yaml")}">config</a>',
-            f'<a href="{rel(folder / "logs" / f"{name}.log")}">log</a>',
-        ]
-        overrides = ", ".join(
-            f"<code>{html.escape(key)}={html.escape(value)}</code>"
-            for key, value in _overrides_for_people(spec["points"][name]["overrides"])
-        )
-        description = html.escape(spec["points"][name].get("description") or "")
-        items.append(f"<li><b>{html.escape(name)}</b> {description} {overrides} — {' · '.join(links)}</li>")
-    parts.append("<h2>Points</h2><ul>" + "".join(items) + "</ul>")
-    return _page(f"Sweep '{spec['sweep']}'", STYLE, "\n".join(parts))
-
-
-def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
-    """The sweep summary from the points' stage outputs; missing files give empty cells and warnings."""
-    spec = yaml.safe_load(Path(workflow_yaml).read_text(encoding="utf-8"))
-    folder = Path(spec["folder"])
-    truth = None
-    if spec.get("ground_truth"):
-        name = spec["ground_truth"]
-        truth_files = _PointFiles(name, Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}", {"reference"})
-        truth = {
-            "steady": truth_files.read_array("reference", "steady.npy"),
-            "frames": truth_files.read_array("reference", "frames.npy"),
-        }
-    input_keys = list(
-        dict.fromkeys(key for point in spec["points"].values() for key, _ in _overrides_for_people(point["overrides"]))
-    )
-    rows, extras, files, images = [], {}, {}, []
-    for name in spec["points"]:
-        row, point_files, extra = _point_row(spec, name, input_keys, truth)
-        rows.append(row)
-        extras[name], files[name] = extra, point_files
-        label = name + "".join(
-            f"\n{key.split('.')[-1]}={value}"
-            for key, value in _overrides_for_people(spec["points"][name]["overrides"])
-            if value != name
-        )
-        label += "".join(
-            _sigma_label(key, medium) for key, medium in point_files.read_json("scene", "optics.json").items()
-        )
-        images.append((name, point_files.read_array("render", "steady.npy"), label))
-    title = f"Sweep '{spec['sweep']}'"
-    paths = write_table(rows, folder, title)
-    write_poster(images, folder / "poster.png", f"{title}: ours, steady")
-    paths["poster"] = folder / "poster.png"
-    series = _error_series(spec, rows, extras, files, truth)
-    error_plot = folder / "error_vs_time.png"
-    if series:
-        from render.figures import error_curves
-
-        error_curves(series, error_plot)
-        paths["error_plot"] = error_plot
-    else:
-        log.warning("sweep summary: no errors against a reference to plot; no error_vs_time.png")
-        for stale in (error_plot, error_plot.with_suffix(".pdf")):
-            stale.unlink(missing_ok=True)
-    paths["report"] = write_text_atomic(folder / "report.html", _report(spec, rows, paths["md"], folder, bool(series)))
-    return paths
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m pipeline.sweep summarize WORKFLOW_YAML``: the summary rule of the workflow."""
-    from pipeline.log import setup_logging
-
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 2 or argv[0] != "summarize":
-        print("usage: python -m pipeline.sweep summarize runs/sweeps/<sweep>/workflow.yaml", file=sys.stderr)
-        return 2
-    setup_logging(quiet=False)
-    paths = write_summary(argv[1])
-    print(f"sweep summary: {paths['report']}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

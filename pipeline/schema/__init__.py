@@ -2,13 +2,23 @@
 
 from __future__ import annotations
 
-from pydantic import Field
+from typing import Any
+
+from pydantic import Field, SerializationInfo, SerializerFunctionWrapHandler, field_validator, model_serializer
 
 from pipeline.schema.base import StrictModel
 from pipeline.schema.composite import CompositeConfig
 from pipeline.schema.geometry import GeometryConfig
 from pipeline.schema.ptpb import PTPBConfig
 from pipeline.schema.scene import ReferenceConfig, SceneConfig
+
+# Keys of the render section whose single home in a pipeline config is elsewhere.
+BORROWED_RENDER_KEYS = {
+    "seed": "seed",
+    "threads": "threads",
+    "max_depth": "scene.max_depth",
+    "rr_depth": "scene.rr_depth",
+}
 
 
 class Config(StrictModel):
@@ -35,12 +45,46 @@ class Config(StrictModel):
     )
     render: PTPBConfig = Field(
         default_factory=PTPBConfig,
-        description="The render stage: our PTPB renderer (seed and threads come from the root).",
+        description="The render stage: our PTPB renderer (seed and threads come from the root, the path depth "
+        "from scene.max_depth and scene.rr_depth).",
     )
     composite: CompositeConfig = Field(
         default_factory=CompositeConfig,
         description="The composite and compare stages: videos, streaks, figures, tables.",
     )
+
+    def render_settings(self) -> PTPBConfig:
+        """The render section with the keys it takes from elsewhere: the root's seed and threads, and the
+        path depth of the scene, which the reference renders with too."""
+        return self.render.model_copy(
+            update={
+                "seed": self.seed,
+                "threads": self.threads,
+                "max_depth": self.scene.max_depth,
+                "rr_depth": self.scene.rr_depth,
+            }
+        )
+
+    @model_serializer(mode="wrap")
+    def _without_borrowed_keys(self, handler: SerializerFunctionWrapHandler, info: SerializationInfo) -> Any:
+        # A dump validates again: the render keys that live elsewhere are left out of it.
+        data = handler(self)
+        if isinstance(data, dict) and isinstance(data.get("render"), dict):
+            data["render"] = {k: v for k, v in data["render"].items() if k not in BORROWED_RENDER_KEYS}
+        return data
+
+    @field_validator("render")
+    @classmethod
+    def _one_home_per_key(cls, render: PTPBConfig) -> PTPBConfig:
+        # The render stage takes these from where every stage reads them; a value under render: would be
+        # silently replaced, so it is refused instead.
+        for key, home in BORROWED_RENDER_KEYS.items():
+            if key in render.model_fields_set:
+                raise ValueError(
+                    f"render.{key} cannot be set in a pipeline config: set `{home}` instead, which the render "
+                    "stage reads (so that ours and the reference use the same value)"
+                )
+        return render
 
 
 __all__ = ["Config", "StrictModel"]

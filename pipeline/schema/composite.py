@@ -7,6 +7,7 @@ from typing import Literal
 from pydantic import Field
 
 from pipeline.schema.base import StrictModel
+from pipeline.units import SPEED_OF_LIGHT
 
 
 class CompositeConfig(StrictModel):
@@ -50,5 +51,5 @@ class CompositeConfig(StrictModel):
         """Frames per second of video: from slow_motion when set, else ``fps``."""
         if self.slow_motion is None:
             return self.fps
-        light_seconds_per_frame = bin_width_opl / 299_792_458.0
+        light_seconds_per_frame = bin_width_opl / SPEED_OF_LIGHT
         return 1.0 / (self.slow_motion * light_seconds_per_frame)

@@ -91,10 +91,14 @@ class PTPBConfig(StrictModel):
     parallel_guard_sin2: float = Field(
         1e-5, ge=0, lt=1, description="Pairs with sin^2(theta) below this are skipped [-]."
     )
-    max_depth: int = Field(64, ge=-1, description="Mitsuba's max_depth: non-null interactions + 1; -1 unbounded [-].")
-    rr_depth: int = Field(5, ge=1, description="Depth from which Russian roulette applies on both sides [-].")
-    seed: int = Field(0, ge=0, description="Key of every random stream [-].")
-    threads: int = Field(0, ge=0, description="Worker threads; 0 uses every core [-].")
+    # In a pipeline config the next four come from scene.max_depth, scene.rr_depth and the root's seed and
+    # threads (pipeline/schema/__init__.py refuses them here); they are fields for direct use of the API.
+    max_depth: int = Field(
+        -1, ge=-1, description="Mitsuba's max_depth: non-null interactions + 1; -1 unbounded (API use only) [-]."
+    )
+    rr_depth: int = Field(8, ge=1, description="Depth from which Russian roulette applies (API use only) [-].")
+    seed: int = Field(0, ge=0, description="Key of every random stream (API use only) [-].")
+    threads: int = Field(0, ge=0, description="Worker threads; 0 uses every core (API use only) [-].")
     accel: Literal["grid", "embree"] = Field(
         "embree",
         description="Beam query structure: uniform grid of diced beams, or an Embree BVH over the same pieces [-].",

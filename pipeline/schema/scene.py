@@ -7,10 +7,12 @@ scene.<field> and reference.<field>.
 
 from __future__ import annotations
 
+import difflib
 from typing import Annotated, Literal
 
-from pydantic import BeforeValidator, Field, NonNegativeFloat, model_validator
+from pydantic import BeforeValidator, Field, NonNegativeFloat, field_validator, model_validator
 
+from pipeline.paths import optics_preset_names
 from pipeline.schema.base import StrictModel
 
 
@@ -199,6 +201,21 @@ class MediumConfig(StrictModel):
     metres_per_unit: float | None = Field(
         None, gt=0, description="Thesis sets: metres per thesis scene unit; coefficients are divided by it [m]."
     )
+
+    @field_validator("preset")
+    @classmethod
+    def _preset_exists(cls, name: str | None) -> str | None:
+        if name is None:
+            return name
+        available = optics_preset_names()
+        if name not in available:
+            close = difflib.get_close_matches(name, available, n=1)
+            hint = f"did you mean '{close[0]}'? " if close else ""
+            raise ValueError(
+                f"unknown optical preset '{name}'; {hint}available: {', '.join(available)} "
+                "(files in configs/presets/optics/)"
+            )
+        return name
 
     @model_validator(mode="after")
     def _one_source(self) -> MediumConfig:

@@ -7,10 +7,13 @@ import numpy as np
 import pytest
 
 from pipeline.schema.composite import CompositeConfig
-from render.composite import Film, side_by_side, streak_images, transient_videos
-from render.metrics import per_frame_relmse, relmse, rmse
-from render.tonemap import display_frames, luminance
-from render.video import PS_PER_M_OPL, probe_mp4
+from pipeline.units import PS_PER_M_OPL, SPEED_OF_LIGHT
+from render import _core
+from render.output.composite import side_by_side, streak_images, transient_videos
+from render.output.files import FrameAxis
+from render.output.metrics import per_frame_relmse, relmse, rmse
+from render.output.tonemap import display_frames, luminance
+from render.output.video import probe_mp4
 
 
 def pulse_frames(t_count=12, height=20, width=30, seed=0):
@@ -40,7 +43,7 @@ def test_global_exposure_keeps_brightness_order():
 def test_videos_decode_with_the_right_frame_count_and_size(tmp_path):
     frames = pulse_frames(t_count=9, height=21, width=30)
     cfg = CompositeConfig(video_min_height=64, fps=10)
-    paths = transient_videos(frames, Film(0.0, 0.003), cfg, tmp_path, metres_per_pixel=0.01)
+    paths = transient_videos(frames, FrameAxis(0.0, 0.003), cfg, tmp_path, metres_per_pixel=0.01)
     for key in ("video", "cumulative_video"):
         info = probe_mp4(paths[key])
         # 21 rows upscaled x4 to 84 (>= 64), 30 columns to 120; both already even.
@@ -48,9 +51,9 @@ def test_videos_decode_with_the_right_frame_count_and_size(tmp_path):
 
 
 def test_slow_motion_sets_the_frame_rate_and_absurd_rates_are_refused(tmp_path):
-    film = Film(0.0, 0.003)
+    film = FrameAxis(0.0, 0.003)
     cfg = CompositeConfig(slow_motion=1e10)
-    assert cfg.frame_rate(0.003) == pytest.approx(1 / (1e10 * 0.003 / 299_792_458.0))
+    assert cfg.frame_rate(0.003) == pytest.approx(1 / (1e10 * 0.003 / SPEED_OF_LIGHT))
     with pytest.raises(ValueError, match="composite.slow_motion"):
         transient_videos(pulse_frames(), film, CompositeConfig(slow_motion=1.0), tmp_path)
 
@@ -58,11 +61,11 @@ def test_slow_motion_sets_the_frame_rate_and_absurd_rates_are_refused(tmp_path):
 def test_streak_images_and_side_by_side(tmp_path):
     frames = pulse_frames()
     cfg = CompositeConfig(video_min_height=64)
-    paths = streak_images(frames, Film(0.0, 0.003), cfg, tmp_path)
+    paths = streak_images(frames, FrameAxis(0.0, 0.003), cfg, tmp_path)
     assert paths["streak_x"].stat().st_size > 1000 and paths["streak_y"].stat().st_size > 1000
     with pytest.raises(ValueError, match="composite.streak_row=99"):
-        streak_images(frames, Film(0.0, 0.003), CompositeConfig(streak_row=99), tmp_path)
-    out = side_by_side(frames, frames * 1.1, ("ours", "reference"), Film(0.0, 0.003), cfg, tmp_path)
+        streak_images(frames, FrameAxis(0.0, 0.003), CompositeConfig(streak_row=99), tmp_path)
+    out = side_by_side(frames, frames * 1.1, ("ours", "reference"), FrameAxis(0.0, 0.003), cfg, tmp_path)
     assert probe_mp4(out["side_by_side_video"])["frames"] == len(frames)
     assert out["side_by_side_still"].stat().st_size > 1000
 
@@ -84,4 +87,5 @@ def test_error_metrics_match_hand_computed_values():
 
 def test_picosecond_conversion_uses_the_exact_speed_of_light():
     assert PS_PER_M_OPL == pytest.approx(3335.640952, rel=1e-9)
+    assert (SPEED_OF_LIGHT, PS_PER_M_OPL) == (_core.SPEED_OF_LIGHT, _core.PS_PER_M_OPL)  # one constant, two languages
     assert 0.003 * PS_PER_M_OPL == pytest.approx(10.007, abs=1e-3)

@@ -7,8 +7,8 @@ import threading
 import numpy as np
 import pytest
 
-from render.raytrace import INVALID_ID, RayEngine
-from render.shapes import box_mesh, sphere_mesh
+from render.ptpb.raytrace import INVALID_ID, RayEngine
+from render.scene.shapes import box_mesh, sphere_mesh
 
 
 def moller_trumbore(origins, directions, vertices, faces):

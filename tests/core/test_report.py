@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from pipeline.schema.composite import CompositeConfig
-from render.composite import Film, streak_images, transient_videos
-from render.report import markdown_table_to_html, write_report
+from render.output.composite import streak_images, transient_videos
+from render.output.files import FrameAxis
+from render.output.report import markdown_table_to_html, write_report
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
@@ -39,8 +40,8 @@ def make_run(root):
     composite = root / "composite"
     composite.mkdir(parents=True)
     cfg = CompositeConfig(video_min_height=64)
-    transient_videos(frames, Film(0.0, 0.003), cfg, composite)
-    streak_images(frames, Film(0.0, 0.003), cfg, composite)
+    transient_videos(frames, FrameAxis(0.0, 0.003), cfg, composite)
+    streak_images(frames, FrameAxis(0.0, 0.003), cfg, composite)
     (composite / "table.md").write_text("| renderer | relMSE |\n|---|---|\n| ours | 0.01 |\n")
     return composite
 

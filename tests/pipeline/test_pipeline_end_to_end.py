@@ -13,7 +13,7 @@ from block_scene import block_config
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
-from render.video import probe_mp4
+from render.output.video import probe_mp4
 
 
 @pytest.mark.mitsuba

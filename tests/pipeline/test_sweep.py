@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.sweep import SweepError, load_sweep, prepare, write_summary
+from pipeline.sweep import SweepError, load_sweep, prepare
+from render.output.summary import write_summary
 
 needs_snakemake = pytest.mark.skipif(importlib.util.find_spec("snakemake") is None, reason="snakemake not installed")
 

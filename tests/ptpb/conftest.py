@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from render.shapes import box_mesh, quad_mesh
+from render.scene.shapes import box_mesh, quad_mesh
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""Hostile inputs through the core directly (render.ptpb.render with a dict scene): broken meshes,
+"""Hostile inputs through the core directly (render.ptpb.api.render with a dict scene): broken meshes,
 extreme but legal media, the memory budget and C++ exceptions. Each case is refused with a
 ValueError that keeps the core's message, or renders finite values in bounded time."""
 
@@ -16,8 +16,8 @@ import pytest
 
 from pipeline.paths import PROJECT_ROOT
 from pipeline.schema.ptpb import BeamRadius, PTPBConfig
-from render.ptpb import memory_bytes, render
-from render.shapes import box_mesh, quad_mesh
+from render.ptpb.api import memory_bytes, render
+from render.scene.shapes import box_mesh, quad_mesh
 
 
 def scene(medium: dict | None = None, box=None, res: int = 12, bins: int = 16) -> dict:
@@ -154,7 +154,7 @@ import json, sys, time
 import numpy as np
 sys.path.insert(0, {tests!r})
 from test_ptpb_hostile import EXTREME_MEDIA, scene, settings
-from render.ptpb import render
+from render.ptpb.api import render
 for name, medium in EXTREME_MEDIA.items():
     t0 = time.perf_counter()
     r = render(scene(medium=medium), settings())

@@ -12,7 +12,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from test_ptpb_physics import cube_scene  # noqa: E402
 
-from render.ptpb import render  # noqa: E402
+from render.ptpb.api import render  # noqa: E402
 
 RES = 24
 MAXD = 64
@@ -182,7 +182,7 @@ def ice_slab_scene(res: int) -> dict:
     """A 1 x 0.3 x 1 m slab of lightly scattering ice (IOR 1.31, smooth dielectric) under the cube scene's
     area light. A slab, not a sphere: a sphere focuses the light into a caustic that few camera rays
     sample, and the estimate's noise would swamp a 3 % comparison."""
-    from render.shapes import box_mesh
+    from render.scene.shapes import box_mesh
 
     scene = cube_scene("steady", res=res)
     sv, sf = box_mesh((-0.5, -0.15, -0.5), (0.5, 0.15, 0.5))
@@ -195,7 +195,7 @@ def ice_slab_scene(res: int) -> dict:
 def mitsuba_ice_slab(tmp_path, spp: int, seed: int) -> np.ndarray:
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("llvm_ad_rgb")
-    from render.ply import write_ply
+    from geometry.meshio import write_ply
 
     T = mi.ScalarTransform4f
     scene = ice_slab_scene(RES)

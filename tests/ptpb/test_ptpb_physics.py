@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from render.ptpb import render
-from render.shapes import box_mesh, quad_mesh
+from render.ptpb.api import render
+from render.scene.shapes import box_mesh, quad_mesh
 
 
 def single_scattering_scene(

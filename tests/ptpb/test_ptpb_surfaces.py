@@ -15,8 +15,8 @@ import pytest
 
 from pipeline.schema.ptpb import PTPBConfig
 from render import _core
-from render.ptpb import render, scene_bounding_sphere
-from render.shapes import box_mesh, quad_mesh
+from render.ptpb.api import render, scene_bounding_sphere
+from render.scene.shapes import box_mesh, quad_mesh
 
 ALBEDO = 0.5
 CAMERA = np.array([0.0, 0.0, 3.0])

@@ -1,6 +1,6 @@
-"""The Mitsuba / mitransient reference (render/mitsuba_ref.py) against closed forms and conventions.
+"""The Mitsuba / mitransient reference (render/mitsuba/) against closed forms and conventions.
 
-Scenes are tiny (≤ 24x16 pixels) and built here from render.shapes meshes. Each test checks physics
+Scenes are tiny (≤ 24x16 pixels) and built here from render.scene.shapes meshes. Each test checks physics
 that the export could get wrong: pixel mapping, radiance units, sun models, energy and time in the
 transient film, the dielectric refusal and the stage's files.
 """
@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from geometry.meshio import write_ply
 from pipeline.schema.scene import ReferenceConfig
-from render import shapes
-from render.exr import read_exr
-from render.ply import write_ply
-from render.scene import (
+from render.output.exr import read_exr
+from render.scene import shapes
+from render.scene.model import (
     Camera,
     Film,
     Medium,
@@ -35,13 +35,9 @@ mi = pytest.importorskip("mitsuba")
 if importlib.util.find_spec("mitransient") is None:  # not imported here: it needs a variant set first
     pytest.skip("mitransient is not installed", allow_module_level=True)
 
-from render.mitsuba_ref import (  # noqa: E402
-    ReferenceRefused,
-    check_reference_limits,
-    render_steady,
-    render_transient,
-    run_reference_stage,
-)
+from render.mitsuba.export import ReferenceRefused, check_reference_limits  # noqa: E402
+from render.mitsuba.passes import render_steady, render_transient  # noqa: E402
+from render.mitsuba.stage import run_reference_stage  # noqa: E402
 
 pytestmark = pytest.mark.mitsuba
 
@@ -472,7 +468,7 @@ def test_variant_fallback_and_transient_needs_llvm(tmp_path, monkeypatch, caplog
     monkeypatch.setattr(mi, "set_variant", no_llvm)
     with pytest.raises(RuntimeError, match="llvm_ad_rgb"):
         render_transient(scene, tmp_path, spp=1, quiet=True)
-    with caplog.at_level("WARNING", logger="render.mitsuba_ref"):
+    with caplog.at_level("WARNING", logger="render.mitsuba"):
         image, timing = render_steady(scene, tmp_path, spp=4, spp_per_pass=4, quiet=True)
     assert timing["variant"] == "scalar_rgb" and "scalar_rgb" in caplog.text
     np.testing.assert_allclose(image / (1000.0 * 0.5 / math.pi), 1.0, atol=0.01)

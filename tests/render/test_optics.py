@@ -1,4 +1,4 @@
-"""Optical presets and formulas of render/optics.py against the tables of snow_optics.md.
+"""Optical presets and formulas of render/scene/optics.py against the tables of snow_optics.md.
 
 Every expected number below is copied from /work/shared/reference/snow_optics.md (the section is
 cited next to each table). Triples are (R, G, B) = (640, 530, 470) nm.
@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from render.optics import (
+from render.scene.optics import (
     ALPHA_ICE,
     N_ICE,
     PRESET_NAMES,

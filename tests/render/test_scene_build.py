@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from geometry.meshio import write_ply
 from pipeline.schema.scene import (
     CameraConfig,
     FilmConfig,
@@ -18,11 +19,11 @@ from pipeline.schema.scene import (
     SkyConfig,
     SunConfig,
 )
-from render import optics
-from render.ply import write_ply
-from render.scene import Scene, project_to_pixel
-from render.scene_build import build_scene, frame_camera, medium_optics, run_scene_stage, site_sun_direction
-from render.shapes import box_mesh, frame_mesh
+from render.scene import optics
+from render.scene.build import build_scene, frame_camera, medium_optics, site_sun_direction
+from render.scene.model import Scene, project_to_pixel
+from render.scene.shapes import box_mesh, frame_mesh
+from render.scene.stage import run_scene_stage
 
 
 def box_scene(**overrides) -> SceneConfig:

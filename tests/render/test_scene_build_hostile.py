@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from geometry.meshio import write_ply
 from pipeline.schema.scene import (
     CameraConfig,
     CoefficientsConfig,
@@ -16,11 +17,11 @@ from pipeline.schema.scene import (
     SkyConfig,
     SunConfig,
 )
-from render.ply import write_ply
-from render.ptpb import render
-from render.ptpb_stage import load_core_scene
-from render.scene_build import build_scene, run_scene_stage
-from render.shapes import box_mesh
+from render.ptpb.api import render
+from render.ptpb.stage import load_core_scene
+from render.scene.build import build_scene
+from render.scene.shapes import box_mesh
+from render.scene.stage import run_scene_stage
 
 
 def ply_scene(path) -> SceneConfig:
@@ -80,7 +81,7 @@ def test_a_hostile_mesh_is_refused_with_the_object_name_and_reason(tmp_path, cas
         data = bytearray((tmp_path / "mesh.ply").read_bytes())
         data[-4:] = np.int32(99).tobytes()
         (tmp_path / "mesh.ply").write_bytes(bytes(data))
-    with pytest.raises(ValueError, match=f"object 'hostile'.*{reason}"):
+    with pytest.raises(ValueError, match=f"objects? 'hostile'.*{reason}"):
         build_scene(ply_scene(tmp_path / "mesh.ply"), tmp_path / "out")
 
 

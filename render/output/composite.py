@@ -1,33 +1,20 @@
 """Transient frames -> videos (light in flight, and light filling the scene), streak images and
-side-by-side comparisons. Pure array work plus the writers in render.video and render.figures.
+side-by-side comparisons. Pure array work plus the writers in render.output.video and render.output.figures.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from render.figures import relative_difference, side_by_side_still, streak_image
-from render.tonemap import display_frames, exposure_scale, to_display
-from render.video import annotate, format_time, upscale, write_mp4
+from render.output.figures import relative_difference, side_by_side_still, streak_image
+from render.output.files import FrameAxis, RenderOutputs
+from render.output.tonemap import display_frames, exposure_scale, to_display
+from render.output.video import annotate, format_time, upscale, write_mp4
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Film:
-    """The time axis of a frame stack (mitransient's names), metres of optical path."""
-
-    start_opl: float
-    bin_width_opl: float
-    frame_mode: str = "bins"  # "bins": integrals over each bin; "gate": densities at bin centres
-
-    def centre(self, k: int) -> float:
-        return self.start_opl + (k + 0.5) * self.bin_width_opl
 
 
 def check_frames(frames: np.ndarray, name: str = "frames") -> np.ndarray:
@@ -39,7 +26,7 @@ def check_frames(frames: np.ndarray, name: str = "frames") -> np.ndarray:
     return frames
 
 
-def _frame_rate(cfg, film: Film) -> float:
+def _frame_rate(cfg, film: FrameAxis) -> float:
     fps = cfg.frame_rate(film.bin_width_opl)
     if not 0.1 <= fps <= 240:
         raise ValueError(
@@ -49,7 +36,9 @@ def _frame_rate(cfg, film: Film) -> float:
     return fps
 
 
-def _annotated_video(display: np.ndarray, film: Film, cfg, caption: str, metres_per_pixel: float | None) -> np.ndarray:
+def _annotated_video(
+    display: np.ndarray, film: FrameAxis, cfg, caption: str, metres_per_pixel: float | None
+) -> np.ndarray:
     out = []
     factor = max(1, int(np.ceil(cfg.video_min_height / display.shape[1])))
     bar_px = None
@@ -64,7 +53,12 @@ def _annotated_video(display: np.ndarray, film: Film, cfg, caption: str, metres_
 
 
 def transient_videos(
-    frames: np.ndarray, film: Film, cfg, out_dir: Path, stem: str = "transient", metres_per_pixel: float | None = None
+    frames: np.ndarray,
+    film: FrameAxis,
+    cfg,
+    out_dir: Path,
+    stem: str = "transient",
+    metres_per_pixel: float | None = None,
 ) -> dict[str, Path]:
     """Write ``<stem>.mp4`` (frame by frame) and ``<stem>_cumulative.mp4`` (running sum)."""
     frames = check_frames(frames)
@@ -82,7 +76,7 @@ def transient_videos(
     return paths
 
 
-def streak_images(frames: np.ndarray, film: Film, cfg, out_dir: Path, stem: str = "streak") -> dict[str, Path]:
+def streak_images(frames: np.ndarray, film: FrameAxis, cfg, out_dir: Path, stem: str = "streak") -> dict[str, Path]:
     frames = check_frames(frames)
     height, width = frames.shape[1:3]
     row = height // 2 if cfg.streak_row is None else cfg.streak_row
@@ -103,7 +97,7 @@ def side_by_side(
     a_frames: np.ndarray,
     b_frames: np.ndarray,
     labels: tuple[str, str],
-    film: Film,
+    film: FrameAxis,
     cfg,
     out_dir: Path,
     stem: str = "side_by_side",
@@ -155,26 +149,26 @@ def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir:
     Reads ``render_dir/frames.npy`` and ``stats.json`` (the film), ``reference_dir/frames.npy`` when a
     transient reference exists, and the camera from ``scene_dir/scene.json`` for the scale bar.
     """
-    from render.scene import Scene, pixel_footprint
+    from render.scene.model import Scene, pixel_footprint
 
-    stats = json.loads((render_dir / "stats.json").read_text())
-    film = Film(stats["start_opl_m"], stats["bin_width_opl_m"], stats["frame_mode"])
-    if film.frame_mode == "steady":
+    ours = RenderOutputs.read(render_dir)
+    film = ours.axis
+    if film is None or film.frame_mode == "steady":
         return {"skipped": "the render is steady; there are no frames to composite"}
     scene = Scene.load(scene_dir / "scene.json")
     camera = scene.camera
     distance = float(np.linalg.norm(np.subtract(camera.target, camera.origin)))
     metres_per_pixel = pixel_footprint(camera, distance)
-    frames = np.load(render_dir / "frames.npy")
+    frames = ours.frames()
+    if frames is None:
+        raise FileNotFoundError(f"{render_dir}: frames.npy is missing; run the render stage again (--force)")
     written = transient_videos(frames, film, cfg, out_dir, metres_per_pixel=metres_per_pixel)
     written.update(streak_images(frames, film, cfg, out_dir))
-    reference_frames = None
-    if reference_dir is not None and (reference_dir / "frames.npy").exists():
-        reference_frames = np.load(reference_dir / "frames.npy")
+    reference_frames = RenderOutputs.read(reference_dir).frames() if reference_dir is not None else None
     if reference_frames is not None and reference_frames.shape == frames.shape:
         # mitransient's frames are bin integrals; gate frames are densities per metre (ptpb.md §2).
-        ours_as_bins = frames * film.bin_width_opl if film.frame_mode == "gate" else frames
-        bins_film = Film(film.start_opl, film.bin_width_opl, "bins")
+        ours_as_bins = film.as_bins(frames)
+        bins_film = film.in_bins()
         written.update(
             side_by_side(ours_as_bins, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg, out_dir)
         )

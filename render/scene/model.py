@@ -264,11 +264,11 @@ def pixel_footprint(camera: Camera, distance: float) -> float:
     return 2.0 * distance * tan_half_fov(camera)[0] / camera.width
 
 
-# ---------------------------------------------------------------- the PTPB core's dict (render/ptpb.py)
+# ---------------------------------------------------------------- the PTPB core's dict (render/ptpb/api.py)
 
 
 def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str]]:
-    """Translate to the core dict of render/ptpb.py, with meshes named by ``mesh`` (relative to the
+    """Translate to the core dict of render/ptpb/api.py, with meshes named by ``mesh`` (relative to the
     scene folder). Returns the dict and the things it had to leave out (spot lights, the sun's size)."""
     ids = list(scene.media)
     index = {k: i for i, k in enumerate(ids)}

@@ -6,7 +6,7 @@ iteration counts and wall times, for error-against-time curves) and ``stats.json
 statistics, resolved R_0/T_0, film and time conventions).
 
 With ``render.checkpoint_every_iterations`` or ``checkpoint_every_s`` set, the accumulated render
-is saved to ``checkpoint_dir/checkpoint.npz`` as it goes (render/ptpb_checkpoint.py). A checkpoint
+is saved to ``checkpoint_dir/checkpoint.npz`` as it goes (render/ptpb/checkpoint.py). A checkpoint
 found there is continued: the stage runner leaves one only under ``pipeline run --resume``, and a
 checkpoint of another scene or other settings is refused. An interrupted render (Ctrl-C) saves
 its completed iterations and raises KeyboardInterrupt, so a partial render is never published.
@@ -21,14 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
+from geometry.meshio import MESH_SUFFIXES, read_mesh
 from pipeline.atomic import atomic_path, save_npy_atomic, write_json_atomic
-from pipeline.runner import checkpoint_dir as stage_checkpoint_dir
 from pipeline.schema.ptpb import PTPBConfig
-from render.exr import write_exr
-from render.figures import rendered_image
-from render.ply import read_ply
-from render.ptpb import core_inputs, render
-from render.ptpb_checkpoint import CHECKPOINT_NAME, load_checkpoint, render_fingerprint, save_checkpoint
+from render.output.exr import write_exr
+from render.output.figures import rendered_image
+from render.output.files import FRAMES, OURS_STATS, STEADY
+from render.ptpb.api import core_inputs, render
+from render.ptpb.checkpoint import CHECKPOINT_NAME, load_checkpoint, render_fingerprint, save_checkpoint
 
 log = logging.getLogger(__name__)
 
@@ -37,13 +37,13 @@ def _load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if path.suffix == ".npz":
         with np.load(path) as z:
             return np.asarray(z["vertices"], np.float32), np.asarray(z["faces"], np.uint32)
-    if path.suffix == ".ply":
-        return read_ply(path)
-    raise ValueError(f"{path}: meshes must be .npz (vertices, faces) or .ply")
+    if path.suffix.lower() in MESH_SUFFIXES:
+        return read_mesh(path)
+    raise ValueError(f"{path}: meshes must be .npz (vertices, faces) or one of {', '.join(MESH_SUFFIXES)}")
 
 
 def load_core_scene(scene_dir: Path) -> dict:
-    """Read ``scene_dir/ptpb_scene.json`` (the core dict of render/ptpb.py; shapes may name a
+    """Read ``scene_dir/ptpb_scene.json`` (the core dict of render/ptpb/api.py; shapes may name a
     ``mesh`` file relative to the folder instead of inline vertices/faces)."""
     path = scene_dir / "ptpb_scene.json"
     if not path.exists():
@@ -63,21 +63,21 @@ def run_render_stage(
     cfg: PTPBConfig,
     out_dir: Path,
     *,
-    seed: int,
-    threads: int,
     quiet: bool = False,
     checkpoint_dir: Path | None = None,
 ) -> dict:
-    """Render the scene in ``scene_dir`` with ``cfg`` (seed and threads override the config's).
+    """Render the scene in ``scene_dir`` with ``cfg`` (in a pipeline, ``Config.render_settings()``: the
+    render section with the root's seed and threads and the scene's path depth).
 
-    ``checkpoint_dir`` defaults to the stage runner's ``.render.checkpoint`` next to ``out_dir``."""
+    ``checkpoint_dir`` holds the checkpoint that ``render.checkpoint_every_*`` saves and a resumed run
+    continues from (the stage runner passes ``.render.checkpoint`` next to ``out_dir``); without it the
+    render neither saves nor resumes checkpoints."""
     out_dir = Path(out_dir)
     scene = load_core_scene(Path(scene_dir))
-    cfg = cfg.model_copy(update={"seed": seed, "threads": threads})
-    path = Path(checkpoint_dir or stage_checkpoint_dir(out_dir.parent, "render")) / CHECKPOINT_NAME
+    path = Path(checkpoint_dir) / CHECKPOINT_NAME if checkpoint_dir is not None else None
     fingerprint = render_fingerprint(*core_inputs(scene, cfg))
     resume = None
-    if path.exists():
+    if path is not None and path.exists():
         try:
             resume = load_checkpoint(path, fingerprint)
         except ValueError as exc:
@@ -86,14 +86,15 @@ def run_render_stage(
             ) from None
         log.info("render: resuming from %s after %d iterations", path, resume["stats"]["iterations"])
 
-    def save(state: dict) -> None:
+    def save(state: dict, path: Path) -> None:
         save_checkpoint(path, state, fingerprint)
         log.info("render: checkpoint after %d iterations -> %s", state["stats"]["iterations"], path)
 
-    result = render(scene, cfg, progress=not quiet, resume=resume, checkpoint=save)
+    checkpoint = (lambda state: save(state, path)) if path is not None else None
+    result = render(scene, cfg, progress=not quiet, resume=resume, checkpoint=checkpoint)
     if result.stats["interrupted"]:
         done = result.stats["iterations"]
-        if cfg.checkpoint_every_iterations or cfg.checkpoint_every_s:
+        if path is not None and (cfg.checkpoint_every_iterations or cfg.checkpoint_every_s):
             log.warning(
                 "render interrupted after %d iterations, which %s keeps; continue with `pipeline run --resume`",
                 done,
@@ -122,8 +123,8 @@ def run_render_stage(
                     seconds=np.array(result.snapshot_seconds),
                     steady=np.stack([im for _, im in result.snapshots]),
                 )
-    save_npy_atomic(out_dir / "steady.npy", result.steady)
-    save_npy_atomic(out_dir / "frames.npy", result.frames)
+    save_npy_atomic(out_dir / STEADY, result.steady)
+    save_npy_atomic(out_dir / FRAMES, result.frames)
     film = scene["film"]
     stats = {
         **{k: (v.item() if hasattr(v, "item") else v) for k, v in result.stats.items()},
@@ -139,5 +140,5 @@ def run_render_stage(
         "camera_leg_included": not cfg.camera_unwarp,
         "config": cfg.model_dump(),
     }
-    write_json_atomic(out_dir / "stats.json", stats)
+    write_json_atomic(out_dir / OURS_STATS, stats)
     return stats

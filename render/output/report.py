@@ -131,9 +131,13 @@ def write_report(report_path: Path, run_root: Path, stage_names: Iterable[str], 
             sections.append(_section(name, folder, report_dir))
     own = _section("this stage", report_dir, report_dir) if report_dir.is_dir() else ""
     body = "\n".join(s for s in sections + [own] if s)
-    page = (
+    return write_text_atomic(report_path, html_page(title, body))
+
+
+def html_page(title: str, body: str) -> str:
+    """The one page skeleton of every HTML file we write: title, style sheet and the media check."""
+    return (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>{html.escape(title)}</title><style>{STYLE}</style><script>{SCRIPT}</script></head>"
-        f"<body data-missing='pending'><h1>{html.escape(title)}</h1>{body}</body></html>\n"
+        f"<body data-missing='pending'><h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n"
     )
-    return write_text_atomic(report_path, page)

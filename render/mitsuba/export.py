@@ -1,6 +1,6 @@
-"""The `reference` stage: render the neutral scene (render/scene.py) with Mitsuba 3 and mitransient.
+"""The neutral scene (render/scene/model.py) as a Mitsuba 3 / mitransient scene dict, and the limits of the reference.
 
-Conventions, on top of render/scene.py and ptpb.md §1-§2:
+Conventions, on top of render/scene/model.py and ptpb.md §1-§2:
 
 - Steady images are ``volpath``; transient ones ``transient_prbvolpath`` with ``camera_unwarp: False``,
   so τ includes the camera leg. Frames are bins (``transient_hdr_film``): W m-2 sr-1 per bin, returned
@@ -23,19 +23,13 @@ from __future__ import annotations
 import importlib
 import logging
 import math
-import resource
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import save_npy_atomic, write_json_atomic
-from pipeline.schema.scene import ReferenceConfig
-from render.exr import write_exr
-from render.figures import rendered_image
-from render.ply import read_ply
-from render.scene import Scene, bounding_sphere_of_points
+from geometry.meshio import read_mesh
+from render.scene.model import Scene, bounding_sphere_of_points
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +79,7 @@ def use_variant(preferred: str = "llvm_ad_rgb", *, transient: bool) -> str:
 def _bounding_sphere(scene: Scene, scene_dir: Path) -> tuple[np.ndarray, float]:
     if scene.bounding_sphere is not None:
         return np.asarray(scene.bounding_sphere["center"], np.float64), float(scene.bounding_sphere["radius"])
-    points = [read_ply(scene.mesh_path(s, scene_dir))[0] for s in scene.shapes]
+    points = [read_mesh(scene.mesh_path(s, scene_dir))[0] for s in scene.shapes]
     if not points:
         return np.zeros(3), 1.0
     return bounding_sphere_of_points(np.concatenate(points))
@@ -365,190 +359,3 @@ def check_reference_limits(scene: Scene, *, transient: bool, force: bool) -> lis
                 "compare with gate frames"
             )
     return warnings
-
-
-# ---------------------------------------------------------------- rendering
-
-
-def _render_passes(
-    scene: Scene,
-    scene_dir: Path,
-    *,
-    transient: bool,
-    spp: int,
-    spp_per_pass: int,
-    seed: int,
-    time_budget_s: float | None,
-    variant: str,
-    quiet: bool,
-) -> tuple[list[np.ndarray], dict]:
-    import mitsuba as mi
-    from tqdm import tqdm
-
-    variant = use_variant(variant, transient=transient)
-    mi_scene = mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass, seed=seed))
-    sums: list[np.ndarray] = []
-    done = passes = 0
-    last = 0.0
-    start = time.perf_counter()
-    desc = "mitransient" if transient else "mitsuba"
-    with tqdm(total=None if time_budget_s else spp, unit="spp", desc=desc, leave=False, disable=quiet) as bar:
-        while True:
-            elapsed = time.perf_counter() - start
-            if time_budget_s is None and done >= spp:
-                break
-            # The budget replaces spp (ReferenceConfig): stop before the pass that would overrun it.
-            if time_budget_s is not None and passes and elapsed + last > time_budget_s:
-                break
-            n = spp_per_pass if time_budget_s is not None else min(spp_per_pass, spp - done)
-            t0 = time.perf_counter()
-            result = mi.render(mi_scene, seed=passes, spp=n)
-            images = [np.array(result[1]), np.array(result[0])] if transient else [np.array(result)]
-            images = [im[..., :3].astype(np.float64) * n for im in images]
-            sums = images if not sums else [a + b for a, b in zip(sums, images)]
-            last = time.perf_counter() - t0
-            done += n
-            passes += 1
-            bar.update(n)
-    timing = {
-        "seconds": time.perf_counter() - start,
-        "spp": done,
-        "passes": passes,
-        "spp_per_pass": spp_per_pass,
-        "seed": seed,
-        "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
-        "variant": variant,
-        "integrator": "transient_prbvolpath" if transient else "volpath",
-    }
-    return [s / done for s in sums], timing
-
-
-def render_steady(
-    scene: Scene,
-    scene_dir: Path,
-    *,
-    spp: int,
-    spp_per_pass: int = 16,
-    seed: int = 0,
-    time_budget_s: float | None = None,
-    variant: str = "llvm_ad_rgb",
-    quiet: bool = False,
-) -> tuple[np.ndarray, dict]:
-    """Mitsuba volpath image (H, W, 3) float32 and its timing {seconds, spp, passes, peak_memory_mib, variant}."""
-    (image,), timing = _render_passes(
-        scene,
-        scene_dir,
-        transient=False,
-        spp=spp,
-        spp_per_pass=spp_per_pass,
-        seed=seed,
-        time_budget_s=time_budget_s,
-        variant=variant,
-        quiet=quiet,
-    )
-    return np.ascontiguousarray(image, dtype=np.float32), timing
-
-
-def render_transient(
-    scene: Scene,
-    scene_dir: Path,
-    *,
-    spp: int,
-    spp_per_pass: int = 16,
-    seed: int = 0,
-    time_budget_s: float | None = None,
-    quiet: bool = False,
-) -> tuple[np.ndarray, np.ndarray, dict]:
-    """mitransient frames (T, H, W, 3) float32 in bins of scene.film, its own steady image (H, W, 3), timing."""
-    (frames, steady), timing = _render_passes(
-        scene,
-        scene_dir,
-        transient=True,
-        spp=spp,
-        spp_per_pass=spp_per_pass,
-        seed=seed,
-        time_budget_s=time_budget_s,
-        variant="llvm_ad_rgb",
-        quiet=quiet,
-    )
-    frames = np.ascontiguousarray(np.moveaxis(frames, 2, 0), dtype=np.float32)  # (H, W, T, C) -> (T, H, W, C)
-    timing["start_opl_shift_m"] = disk_sun_opl_shift(scene, scene_dir)
-    return frames, np.ascontiguousarray(steady, dtype=np.float32), timing
-
-
-# ---------------------------------------------------------------- the stage
-
-
-def run_reference_stage(
-    scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *, seed: int, quiet: bool = False
-) -> dict:
-    """Render ``scene_dir/scene.json`` as ``cfg`` asks and write the reference outputs into ``out_dir``:
-    steady.exr/.npy, frames.npy, frames/frame_NNNN.exr, transient_steady.npy and timing.json."""
-    scene_dir, out_dir = Path(scene_dir), Path(out_dir)
-    scene = Scene.load(scene_dir / "scene.json")
-    transient = cfg.transient and scene.film.mode == "transient"
-    warnings = check_reference_limits(scene, transient=transient, force=cfg.force)
-    if cfg.transient and not transient:
-        warnings.append("reference.transient is set but scene.film.mode is steady: no transient reference")
-    for w in warnings:
-        log.warning("reference: %s", w)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    common = {"spp_per_pass": cfg.spp_per_pass, "time_budget_s": cfg.time_budget_s, "quiet": quiet}
-    timing: dict[str, Any] = {
-        "steady": None,
-        "transient": None,
-        "warnings": warnings,
-        "camera_leg_included": True,
-        "frame_units": FRAME_UNITS,
-        "film": {
-            "mode": scene.film.mode,
-            "temporal_bins": scene.film.temporal_bins,
-            "start_opl": scene.film.start_opl,
-            "bin_width_opl": scene.film.bin_width_opl,
-            "end_opl": scene.film.start_opl + scene.film.temporal_bins * scene.film.bin_width_opl,
-            "width": scene.camera.width,
-            "height": scene.camera.height,
-            "frame_mode": "bins",
-        },
-    }
-    if cfg.steady:
-        image, timing["steady"] = render_steady(scene, scene_dir, spp=cfg.spp, seed=seed, variant=cfg.variant, **common)
-        write_exr(out_dir / "steady.exr", image)
-        steady_timing = timing["steady"]
-        rendered_image(
-            image,
-            out_dir / "steady.png",
-            f"Mitsuba 3 volpath, {steady_timing['spp']} spp, {steady_timing['seconds']:.0f} s",
-        )
-        save_npy_atomic(out_dir / "steady.npy", image)
-    if transient:
-        frames, steady, timing["transient"] = render_transient(
-            scene, scene_dir, spp=cfg.transient_spp or cfg.spp, seed=seed + TRANSIENT_SEED_OFFSET, **common
-        )
-        save_npy_atomic(out_dir / "frames.npy", frames)
-        save_npy_atomic(out_dir / "transient_steady.npy", steady)
-        for k, frame in enumerate(frames):
-            write_exr(out_dir / "frames" / f"frame_{k:04d}.exr", frame)
-        timing["film"]["start_opl_shift_m"] = timing["transient"]["start_opl_shift_m"]
-    write_json_atomic(out_dir / "timing.json", timing)
-    return {
-        "steady": timing["steady"] is not None,
-        "transient": timing["transient"] is not None,
-        "frames": scene.film.temporal_bins if transient else 0,
-        "seconds": sum(t["seconds"] for t in (timing["steady"], timing["transient"]) if t),
-        "warnings": warnings,
-    }
-
-
-__all__ = [
-    "ReferenceRefused",
-    "use_variant",
-    "scene_to_mitsuba",
-    "check_reference_limits",
-    "disk_sun",
-    "disk_sun_opl_shift",
-    "render_steady",
-    "render_transient",
-    "run_reference_stage",
-    "FRAME_UNITS",
-]

@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.schema.ptpb import BeamRadius, PTPBConfig, TimeHalfWidth
+from pipeline.schema.ptpb import PTPBConfig
+from render.ptpb.settings import resolve_settings, scene_bounding_sphere
 
 __all__ = ["RenderResult", "core_inputs", "memory_bytes", "render", "resolve_settings", "scene_bounding_sphere"]
 
@@ -43,103 +44,6 @@ class RenderResult:
     stats: dict[str, Any]
     snapshots: list[tuple[int, np.ndarray]] = field(default_factory=list)
     snapshot_seconds: list[float] = field(default_factory=list)  # wall time of each snapshot since the start
-
-
-def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:
-    """Centre and radius of the bounding sphere of the shapes' axis-aligned box (as Mitsuba builds it)."""
-    pts = [np.asarray(s["vertices"], dtype=np.float64).reshape(-1, 3) for s in scene.get("shapes", [])]
-    if not pts:
-        return np.zeros(3), 1.0
-    allp = np.concatenate(pts)
-    lo, hi = allp.min(0), allp.max(0)
-    centre = 0.5 * (lo + hi)
-    return centre, float(max(np.linalg.norm(hi - centre), 1e-4))
-
-
-def _tan_half_fov_x(cam: dict) -> float:
-    from render.scene import Camera, tan_half_fov
-
-    fov_only = Camera(
-        (0.0, 0.0, 0.0),
-        (0.0, 0.0, 1.0),
-        (0.0, 1.0, 0.0),
-        cam["fov"],
-        cam["width"],
-        cam["height"],
-        cam.get("fov_axis", "x"),
-    )
-    return tan_half_fov(fov_only)[0]
-
-
-def _resolve_radius(spec: BeamRadius, scene: dict, centre: np.ndarray, radius: float) -> float:
-    """A kernel radius in metres: absolute, a fraction of the scene radius, or pixel footprints
-    2 z tan(fov_x/2) / W at the distance z from the camera to the scene centre (ptpb.md §6)."""
-    if spec.unit == "m":
-        return spec.value
-    if spec.unit == "scene_radius":
-        return spec.value * radius
-    cam = scene["camera"]
-    depth = float(np.linalg.norm(centre - np.asarray(cam["origin"], dtype=np.float64))) or radius
-    return spec.value * 2 * depth * _tan_half_fov_x(cam) / cam["width"]
-
-
-def _resolve_half_width(spec: TimeHalfWidth, n: float, radius_m: float, bin_width: float) -> float:
-    """A temporal half-width in metres of OPL, with the floor of half a bin (ptpb.md §6)."""
-    if spec.unit == "m_opl":
-        t0 = spec.value
-    elif spec.unit == "bin_width":
-        t0 = spec.value * bin_width
-    else:
-        t0 = spec.value * n * radius_m
-    return max(t0, 0.5 * bin_width)
-
-
-def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
-    """Turn a PTPBConfig into the core's settings dict: units resolved to metres (ptpb.md §6).
-
-    Beams and surface photons (§7) run separate schedules: R_0, T_0, alpha for the beams and
-    r_0, their own T_0 (the same rule with r_0 in place of R_0) and surface_alpha for surfaces."""
-    film = scene["film"]
-    mode = cfg.frame_mode or film["frame_mode"]
-    alpha = cfg.alpha if cfg.alpha is not None else (2.0 / 3.0 if mode == "gate" else 0.8)
-    # alpha* = 4 / (d + 4): the disk (d = 2) in bins/steady, the disk x time kernel (d = 3) in gate.
-    surface_alpha = cfg.surface_alpha if cfg.surface_alpha is not None else (4.0 / 7.0 if mode == "gate" else 2.0 / 3.0)
-    centre, radius = scene_bounding_sphere(scene)
-    r0 = _resolve_radius(cfg.initial_beam_radius, scene, centre, radius)
-    r0_surface = _resolve_radius(cfg.initial_surface_radius, scene, centre, radius)
-    n = max([m.get("ior", 1.0) for m in scene.get("media", [])] + [scene.get("ambient_ior", 1.0)])
-    bin_width = film.get("bin_width_opl", 0.003)
-    t0 = _resolve_half_width(cfg.initial_time_half_width, n, r0, bin_width)
-    t0_surface = _resolve_half_width(cfg.initial_time_half_width, n, r0_surface, bin_width)
-    return {
-        "iterations": cfg.iterations,
-        "time_budget_s": cfg.time_budget_s or 0.0,
-        "light_paths_per_iteration": cfg.light_paths_per_iteration,
-        "alpha": alpha,
-        "initial_beam_radius": r0,
-        "initial_time_half_width": t0,
-        "initial_surface_radius": r0_surface,
-        "initial_surface_time_half_width": t0_surface,
-        "surface_alpha": surface_alpha,
-        "surface_normal_cos": cfg.surface_normal_cos,
-        "spatial_kernel": cfg.spatial_kernel,
-        "temporal_kernel": cfg.temporal_kernel,
-        "photon_beam_kind": cfg.photon_beam_kind,
-        "query_beam_kind": cfg.query_beam_kind,
-        "parallel_guard_sin2": cfg.parallel_guard_sin2,
-        "max_depth": cfg.max_depth,
-        "rr_depth": cfg.rr_depth,
-        "seed": cfg.seed,
-        "threads": cfg.threads,
-        "accel": cfg.accel,
-        "grid_resolution": cfg.grid_resolution,
-        "transmittance_cutoff": cfg.transmittance_cutoff,
-        "camera_unwarp": cfg.camera_unwarp,
-        "snapshot_every": cfg.snapshot_every,
-        "checkpoint_every_iterations": cfg.checkpoint_every_iterations,
-        "checkpoint_every_s": cfg.checkpoint_every_s or 0.0,
-        "memory_budget_gib": cfg.memory_budget_gib,
-    }
 
 
 def core_inputs(scene: dict, settings: PTPBConfig | dict, **overrides: Any) -> tuple[dict, dict]:

@@ -1,4 +1,4 @@
-"""The `scene` stage: turn the config's scene section and the geometry stage's mesh into the
+"""The scene builder: turn the config's scene section and the geometry stage's mesh into the
 neutral scene description (``scene.json``), the PTPB core's dict (``ptpb_scene.json``), the
 meshes (``meshes/*.ply``) and the media's derived optical quantities (``optics.json``).
 
@@ -24,12 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import write_json_atomic
+from geometry.meshio import read_mesh, write_ply
 from pipeline.schema.scene import CameraConfig, FilmConfig, MediumConfig, ObjectConfig, SceneConfig
-from render import optics as optics_mod
-from render import shapes
-from render.ply import read_ply, write_ply
-from render.scene import (
+from render.scene import optics as optics_mod
+from render.scene import shapes
+from render.scene.model import (
     Camera,
     Film,
     Medium,
@@ -40,7 +39,6 @@ from render.scene import (
     sun_direction,
     sun_tau_origin,
     tan_half_fov,
-    to_ptpb_core,
 )
 
 log = logging.getLogger(__name__)
@@ -152,9 +150,10 @@ def _object_mesh(obj: ObjectConfig, penitentes: tuple[np.ndarray, np.ndarray] | 
     if not path.is_file():
         raise ValueError(f"{where}: mesh file {path} does not exist (scene.objects[].path)")
     try:
-        return read_ply(path)
+        return read_mesh(path)
     except (ValueError, KeyError, IndexError) as exc:  # a truncated or foreign PLY
-        raise ValueError(f"{where}: cannot read mesh file {path}: {exc}") from None
+        reason = str(exc).removeprefix(f"{path}: ")
+        raise ValueError(f"{where}: cannot read mesh file {path}: {reason}") from None
 
 
 def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> None:
@@ -296,7 +295,7 @@ def direct_arrivals(
 
     Returns (lights with a time origin, rows, columns), NaN where the camera sees no surface; the sun,
     point and spot lights come first in scene order, then the emitting shapes."""
-    from render.raytrace import RayEngine
+    from render.ptpb.raytrace import RayEngine
 
     engine = RayEngine()
     for i, (v, f) in enumerate(meshes):
@@ -365,7 +364,7 @@ def build_scene(
                 f"{path}: the scene has a penitentes object but the geometry stage's mesh is "
                 "missing; run the geometry stage first"
             )
-        penitentes = read_ply(path)
+        penitentes = read_mesh(path)
     media = {key: medium_optics(m, key) for key, m in cfg.media.items()}
     meshes: list[tuple[str, tuple[np.ndarray, np.ndarray]]] = []
     scene_shapes: list[Shape] = []
@@ -413,7 +412,7 @@ def build_scene(
     )
     film = fit_window(cfg.film, arrivals)
     if arrivals.shape[0] and np.any(np.isfinite(arrivals)):
-        from render.figures import arrival_map
+        from render.output.figures import arrival_map
 
         first = np.nanmin(np.where(np.isfinite(arrivals), arrivals, np.inf), axis=0)
         arrival_map(
@@ -439,49 +438,6 @@ def build_scene(
     return scene, media
 
 
-def run_scene_stage(
-    cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = None, site: dict | None = None
-) -> dict:
-    """Build and write the scene folder; return a small summary."""
-    out_dir = Path(out_dir)
-    scene, media = build_scene(cfg, out_dir, geometry_dir=geometry_dir, site=site)
-    optics_report = {
-        key: {"medium": m.to_dict(), "derived": optics_mod.derived_quantities(m).to_dict()} for key, m in media.items()
-    }
-    write_json_atomic(out_dir / "optics.json", optics_report)
-    core, omitted = to_ptpb_core(scene)
-    for item in omitted:
-        log.warning("PTPB scene: %s", item)
-    write_json_atomic(out_dir / "ptpb_scene.json", core)
-    scene.notes.extend(f"PTPB: {item}" for item in omitted)
-    scene.save(out_dir / "scene.json")
-    film = scene.film
-    return {
-        "camera_origin": list(scene.camera.origin),
-        "camera_target": list(scene.camera.target),
-        "bounding_radius_m": scene.bounding_sphere["radius"],
-        "film": {
-            "mode": film.mode,
-            "temporal_bins": film.temporal_bins,
-            "start_opl": film.start_opl,
-            "bin_width_opl": film.bin_width_opl,
-            "frame_mode": film.frame_mode,
-        },
-        "media": {
-            k: {
-                "sigma_s": list(m.sigma_s),
-                "sigma_a": list(m.sigma_a),
-                "g": m.render_g,
-                "form": m.form,
-                "diffuse_albedo": optics_report[k]["derived"]["diffuse_albedo"],
-                "efolding_depth_m": optics_report[k]["derived"]["efolding_depth"],
-            }
-            for k, m in media.items()
-        },
-        "omitted_by_ptpb": omitted,
-    }
-
-
 __all__ = [
     "medium_optics",
     "scene_medium",
@@ -490,5 +446,4 @@ __all__ = [
     "direct_arrivals",
     "fit_window",
     "build_scene",
-    "run_scene_stage",
 ]

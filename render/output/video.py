@@ -10,9 +10,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from pipeline.atomic import atomic_path
-
-SPEED_OF_LIGHT = 299_792_458.0  # m/s, exact
-PS_PER_M_OPL = 1e12 / SPEED_OF_LIGHT  # 3335.640952 ps per metre of optical path
+from pipeline.units import PS_PER_M_OPL
 
 
 def opl_to_ps(opl_m: np.ndarray | float) -> np.ndarray | float:

@@ -23,7 +23,7 @@ from typing import Literal
 import numpy as np
 import yaml
 
-from pipeline.paths import PRESETS_DIR
+from pipeline.paths import OPTICS_PRESETS_DIR, optics_preset_names
 
 RHO_ICE = 917.0  # kg m-3
 WAVELENGTHS_NM = (640.0, 530.0, 470.0)
@@ -34,7 +34,6 @@ N_ICE = (1.308, 1.312, 1.315)
 # Black carbon mass absorption cross-section at 640/530/470 nm (Bond & Bergstrom 2006, ~1/lambda) [m2 kg-1].
 MAC_BLACK_CARBON = (6.4e3, 7.8e3, 8.8e3)
 
-OPTICS_PRESETS_DIR = PRESETS_DIR / "optics"
 PRESET_NAMES = ("fresh_snow", "aged_snow", "penitente_firn", "dense_firn", "bubbly_ice", "clear_ice")
 THESIS_SET_NAMES = tuple(f"thesis_set_{k}" for k in range(1, 7))
 
@@ -387,7 +386,7 @@ def preset_path(name: str) -> Path:
 
 
 def available_presets() -> list[str]:
-    return sorted(p.stem for p in OPTICS_PRESETS_DIR.glob("*.yaml"))
+    return optics_preset_names()
 
 
 def optics_from_mapping(spec: Mapping, name: str) -> MediumOptics:

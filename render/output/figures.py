@@ -16,8 +16,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pipeline.atomic import atomic_path  # noqa: E402
-from render.tonemap import ToneCurve, luminance, to_display  # noqa: E402
-from render.video import PS_PER_M_OPL  # noqa: E402
+from pipeline.units import PS_PER_M_OPL  # noqa: E402
+from render.output.tonemap import ToneCurve, luminance, to_display  # noqa: E402
 
 
 def _save(fig, path: Path, pdf: bool = False) -> list[Path]:
@@ -143,7 +143,7 @@ def poster_grid(
     percentile: float = 99.5,
 ) -> list[Path]:
     """A labelled grid of renders sharing one exposure, so brightness compares across panels."""
-    from render.tonemap import exposure_scale
+    from render.output.tonemap import exposure_scale
 
     if len(images) != len(labels) or not images:
         raise ValueError("poster grid needs one label per image and at least one image")
@@ -164,7 +164,7 @@ def rendered_image(
     image: np.ndarray, path: Path, title: str, curve: ToneCurve = "filmic", percentile: float = 99.5
 ) -> list[Path]:
     """One tone-mapped render with a title, e.g. a stage's steady image."""
-    from render.tonemap import exposure_scale
+    from render.output.tonemap import exposure_scale
 
     image = np.asarray(image)
     height, width = image.shape[:2]

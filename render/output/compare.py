@@ -3,15 +3,15 @@ run report. relMSE and RMSE are against the Mitsuba steady image and the mitrans
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pipeline.atomic import write_text_atomic
-from render.figures import error_curves
-from render.metrics import mean_radiance, relmse, rmse
+from render.output.figures import error_curves
+from render.output.files import RenderOutputs
+from render.output.metrics import mean_radiance, relmse, rmse
 
 COLUMNS = [
     "renderer",
@@ -25,16 +25,6 @@ COLUMNS = [
     "mean_b",
     "peak_memory_mib",
 ]
-
-
-def _read_json(path: Path) -> dict[str, Any]:
-    return json.loads(path.read_text()) if path.exists() else {}
-
-
-def _load(folder: Path | None, name: str) -> np.ndarray | None:
-    if folder is None or not (folder / name).exists():
-        return None
-    return np.load(folder / name, allow_pickle=False)
 
 
 def _row(renderer, quantity, seconds, count, image, reference, memory) -> dict[str, Any]:
@@ -73,28 +63,29 @@ def write_table(rows: list[dict[str, Any]], out_dir: Path, stem: str = "comparis
     write_text_atomic(out_dir / f"{stem}.csv", "\n".join(csv) + "\n")
 
 
-def compare_renders(ours_dir: Path | None, reference_dir: Path | None, film, out_dir: Path) -> dict[str, Any]:
-    ours_stats = _read_json(ours_dir / "stats.json") if ours_dir else {}
-    ref_timing = _read_json(reference_dir / "timing.json") if reference_dir else {}
+def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: Path) -> dict[str, Any]:
+    ours = RenderOutputs.read(ours_dir) if ours_dir else None
+    reference = RenderOutputs.read(reference_dir) if reference_dir else None
+    ours_stats = ours.stats if ours else {}
+    ref_timing = reference.stats if reference else {}
     rows: list[dict[str, Any]] = []
-    steady_ref = _load(reference_dir, "steady.npy")
-    frames_ref = _load(reference_dir, "frames.npy")
-    steady_ours = _load(ours_dir, "steady.npy")
-    frames_ours = _load(ours_dir, "frames.npy")
+    steady_ref = reference.steady() if reference else None
+    frames_ref = reference.frames() if reference else None
+    steady_ours = ours.steady() if ours else None
+    frames_ours = ours.frames_as_bins() if ours else None
     ours_seconds = ours_stats.get("seconds") or ours_stats.get("time_total_s")
     ours_iterations = ours_stats.get("iterations")
     ours_memory = ours_stats.get("peak_memory_mib")
     if steady_ours is not None:
         rows.append(_row("ours (PTPB)", "steady", ours_seconds, ours_iterations, steady_ours, steady_ref, ours_memory))
-    if frames_ours is not None:
-        as_bins = frames_ours * film.bin_width_opl if film.frame_mode == "gate" else frames_ours
+    if frames_ours is not None and ours is not None and ours.axis is not None:
         rows.append(
             _row(
                 "ours (PTPB)",
-                f"frames ({film.frame_mode})",
+                f"frames ({ours.axis.frame_mode})",
                 ours_seconds,
                 ours_iterations,
-                as_bins,
+                frames_ours,
                 frames_ref,
                 ours_memory,
             )
@@ -142,11 +133,11 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, film, out
 
 
 def run_compare_stage(
-    run_root: Path, ours_dir: Path | None, reference_dir: Path | None, film, out_dir: Path, stage_names, title: str
+    run_root: Path, ours_dir: Path | None, reference_dir: Path | None, out_dir: Path, stage_names, title: str
 ) -> dict:
     """The `compare` stage: the table, the error plot and ``report.html`` linking every stage's files."""
-    from render.report import write_report
+    from render.output.report import write_report
 
-    result = compare_renders(ours_dir, reference_dir, film, out_dir)
+    result = compare_renders(ours_dir, reference_dir, out_dir)
     write_report(out_dir / "report.html", run_root, [n for n in stage_names if n != "compare"], title)
     return {"rows": [{k: r[k] for k in ("renderer", "quantity", "seconds", "relmse")} for r in result["rows"]]}

@@ -1,0 +1,121 @@
+"""Mitsuba volpath and mitransient renders in passes of ``spp_per_pass`` (pass i uses seed + i), with timings."""
+
+from __future__ import annotations
+
+import logging
+import resource
+import time
+from pathlib import Path
+
+import numpy as np
+
+from render.mitsuba.export import disk_sun_opl_shift, scene_to_mitsuba, use_variant
+from render.scene.model import Scene
+
+log = logging.getLogger(__name__)
+
+
+def _render_passes(
+    scene: Scene,
+    scene_dir: Path,
+    *,
+    transient: bool,
+    spp: int,
+    spp_per_pass: int,
+    seed: int,
+    time_budget_s: float | None,
+    variant: str,
+    quiet: bool,
+) -> tuple[list[np.ndarray], dict]:
+    import mitsuba as mi
+    from tqdm import tqdm
+
+    variant = use_variant(variant, transient=transient)
+    mi_scene = mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass, seed=seed))
+    sums: list[np.ndarray] = []
+    done = passes = 0
+    last = 0.0
+    start = time.perf_counter()
+    desc = "mitransient" if transient else "mitsuba"
+    with tqdm(total=None if time_budget_s else spp, unit="spp", desc=desc, leave=False, disable=quiet) as bar:
+        while True:
+            elapsed = time.perf_counter() - start
+            if time_budget_s is None and done >= spp:
+                break
+            # The budget replaces spp (ReferenceConfig): stop before the pass that would overrun it.
+            if time_budget_s is not None and passes and elapsed + last > time_budget_s:
+                break
+            n = spp_per_pass if time_budget_s is not None else min(spp_per_pass, spp - done)
+            t0 = time.perf_counter()
+            result = mi.render(mi_scene, seed=passes, spp=n)
+            images = [np.array(result[1]), np.array(result[0])] if transient else [np.array(result)]
+            images = [im[..., :3].astype(np.float64) * n for im in images]
+            sums = images if not sums else [a + b for a, b in zip(sums, images)]
+            last = time.perf_counter() - t0
+            done += n
+            passes += 1
+            bar.update(n)
+    timing = {
+        "seconds": time.perf_counter() - start,
+        "spp": done,
+        "passes": passes,
+        "spp_per_pass": spp_per_pass,
+        "seed": seed,
+        "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "variant": variant,
+        "integrator": "transient_prbvolpath" if transient else "volpath",
+    }
+    return [s / done for s in sums], timing
+
+
+def render_steady(
+    scene: Scene,
+    scene_dir: Path,
+    *,
+    spp: int,
+    spp_per_pass: int = 16,
+    seed: int = 0,
+    time_budget_s: float | None = None,
+    variant: str = "llvm_ad_rgb",
+    quiet: bool = False,
+) -> tuple[np.ndarray, dict]:
+    """Mitsuba volpath image (H, W, 3) float32 and its timing {seconds, spp, passes, peak_memory_mib, variant}."""
+    (image,), timing = _render_passes(
+        scene,
+        scene_dir,
+        transient=False,
+        spp=spp,
+        spp_per_pass=spp_per_pass,
+        seed=seed,
+        time_budget_s=time_budget_s,
+        variant=variant,
+        quiet=quiet,
+    )
+    return np.ascontiguousarray(image, dtype=np.float32), timing
+
+
+def render_transient(
+    scene: Scene,
+    scene_dir: Path,
+    *,
+    spp: int,
+    spp_per_pass: int = 16,
+    seed: int = 0,
+    time_budget_s: float | None = None,
+    quiet: bool = False,
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """mitransient frames (T, H, W, 3) float32 in bins of scene.film, its own steady image (H, W, 3), timing."""
+    (frames, steady), timing = _render_passes(
+        scene,
+        scene_dir,
+        transient=True,
+        spp=spp,
+        spp_per_pass=spp_per_pass,
+        seed=seed,
+        time_budget_s=time_budget_s,
+        variant="llvm_ad_rgb",
+        quiet=quiet,
+    )
+    frames = np.ascontiguousarray(np.moveaxis(frames, 2, 0), dtype=np.float32)  # (H, W, T, C) -> (T, H, W, C)
+    timing["start_opl_shift_m"] = disk_sun_opl_shift(scene, scene_dir)
+    return frames, np.ascontiguousarray(steady, dtype=np.float32), timing

@@ -1,0 +1,79 @@
+"""The `reference` stage: render the scene folder with Mitsuba 3 (steady) and mitransient (frames)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from pipeline.atomic import save_npy_atomic, write_json_atomic
+from pipeline.schema.scene import ReferenceConfig
+from render.mitsuba.export import FRAME_UNITS, TRANSIENT_SEED_OFFSET, check_reference_limits
+from render.mitsuba.passes import render_steady, render_transient
+from render.output.exr import write_exr
+from render.output.figures import rendered_image
+from render.output.files import FRAMES, REFERENCE_TIMING, STEADY
+from render.scene.model import Scene
+
+log = logging.getLogger(__name__)
+
+
+def run_reference_stage(
+    scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *, seed: int, quiet: bool = False
+) -> dict:
+    """Render ``scene_dir/scene.json`` as ``cfg`` asks and write the reference outputs into ``out_dir``:
+    steady.exr/.npy, frames.npy, frames/frame_NNNN.exr, transient_steady.npy and timing.json."""
+    scene_dir, out_dir = Path(scene_dir), Path(out_dir)
+    scene = Scene.load(scene_dir / "scene.json")
+    transient = cfg.transient and scene.film.mode == "transient"
+    warnings = check_reference_limits(scene, transient=transient, force=cfg.force)
+    if cfg.transient and not transient:
+        warnings.append("reference.transient is set but scene.film.mode is steady: no transient reference")
+    for w in warnings:
+        log.warning("reference: %s", w)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    common = {"spp_per_pass": cfg.spp_per_pass, "time_budget_s": cfg.time_budget_s, "quiet": quiet}
+    timing: dict[str, Any] = {
+        "steady": None,
+        "transient": None,
+        "warnings": warnings,
+        "camera_leg_included": True,
+        "frame_units": FRAME_UNITS,
+        "film": {
+            "mode": scene.film.mode,
+            "temporal_bins": scene.film.temporal_bins,
+            "start_opl": scene.film.start_opl,
+            "bin_width_opl": scene.film.bin_width_opl,
+            "end_opl": scene.film.start_opl + scene.film.temporal_bins * scene.film.bin_width_opl,
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "frame_mode": "bins",
+        },
+    }
+    if cfg.steady:
+        image, timing["steady"] = render_steady(scene, scene_dir, spp=cfg.spp, seed=seed, variant=cfg.variant, **common)
+        write_exr(out_dir / "steady.exr", image)
+        steady_timing = timing["steady"]
+        rendered_image(
+            image,
+            out_dir / "steady.png",
+            f"Mitsuba 3 volpath, {steady_timing['spp']} spp, {steady_timing['seconds']:.0f} s",
+        )
+        save_npy_atomic(out_dir / STEADY, image)
+    if transient:
+        frames, steady, timing["transient"] = render_transient(
+            scene, scene_dir, spp=cfg.transient_spp or cfg.spp, seed=seed + TRANSIENT_SEED_OFFSET, **common
+        )
+        save_npy_atomic(out_dir / FRAMES, frames)
+        save_npy_atomic(out_dir / "transient_steady.npy", steady)
+        for k, frame in enumerate(frames):
+            write_exr(out_dir / "frames" / f"frame_{k:04d}.exr", frame)
+        timing["film"]["start_opl_shift_m"] = timing["transient"]["start_opl_shift_m"]
+    write_json_atomic(out_dir / REFERENCE_TIMING, timing)
+    return {
+        "steady": timing["steady"] is not None,
+        "transient": timing["transient"] is not None,
+        "frames": scene.film.temporal_bins if transient else 0,
+        "seconds": sum(t["seconds"] for t in (timing["steady"], timing["transient"]) if t),
+        "warnings": warnings,
+    }

@@ -1,0 +1,107 @@
+"""The files a render stage leaves behind, read back in one place.
+
+Both renderers' stages write ``steady.npy`` (H, W, 3) and, when transient, ``frames.npy``
+(T, H, W, 3) float32. Ours describes its film in ``stats.json`` (``frame_mode``, ``start_opl_m``,
+``bin_width_opl_m``, ``temporal_bins``); the reference in ``timing.json`` (``film``: ``start_opl``,
+``bin_width_opl``, ``temporal_bins``, ``frame_mode`` "bins"). ``RenderOutputs.read`` gives either as
+one typed object, and ``FrameAxis.as_bins`` is the only conversion of gate frames (densities per
+metre of OPL at bin centres) to bins (integrals over each bin) in the project.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+OURS_STATS = "stats.json"
+REFERENCE_TIMING = "timing.json"
+STEADY = "steady.npy"
+FRAMES = "frames.npy"
+
+
+@dataclass(frozen=True)
+class FrameAxis:
+    """The time axis of a frame stack (mitransient's names), in metres of optical path length."""
+
+    start_opl: float
+    bin_width_opl: float
+    frame_mode: str = "bins"  # "bins": integrals over each bin; "gate": densities at bin centres; "steady"
+    temporal_bins: int = 0
+
+    def centre(self, k: int) -> float:
+        """OPL at the centre of frame ``k`` [m]."""
+        return self.start_opl + (k + 0.5) * self.bin_width_opl
+
+    def as_bins(self, frames: np.ndarray) -> np.ndarray:
+        """Frames as bin integrals: gate densities times the bin width, bins as they are."""
+        return frames * self.bin_width_opl if self.frame_mode == "gate" else frames
+
+    def in_bins(self) -> FrameAxis:
+        """This axis for frames converted by ``as_bins``."""
+        return FrameAxis(self.start_opl, self.bin_width_opl, "bins", self.temporal_bins)
+
+
+@dataclass
+class RenderOutputs:
+    """One render stage's folder: ``renderer`` is "ours" (stats.json) or "reference" (timing.json)."""
+
+    folder: Path
+    renderer: str
+    axis: FrameAxis | None
+    stats: dict[str, Any] = field(repr=False)
+
+    @classmethod
+    def read(cls, folder: str | Path) -> RenderOutputs:
+        """Read the description of ``folder``; arrays load on demand (``steady()``, ``frames()``)."""
+        folder = Path(folder)
+        if (folder / OURS_STATS).is_file():
+            stats = json.loads((folder / OURS_STATS).read_text(encoding="utf-8"))
+            axis = FrameAxis(
+                float(stats.get("start_opl_m", 0.0)),
+                float(stats.get("bin_width_opl_m", 0.0)),
+                str(stats.get("frame_mode", "steady")),
+                int(stats.get("temporal_bins", 0)),
+            )
+            return cls(folder, "ours", axis, stats)
+        if (folder / REFERENCE_TIMING).is_file():
+            timing = json.loads((folder / REFERENCE_TIMING).read_text(encoding="utf-8"))
+            film = timing.get("film") or {}
+            axis = None
+            if timing.get("transient"):
+                axis = FrameAxis(
+                    float(film.get("start_opl", 0.0)),
+                    float(film.get("bin_width_opl", 0.0)),
+                    "bins",
+                    int(film.get("temporal_bins", 0)),
+                )
+            return cls(folder, "reference", axis, timing)
+        raise FileNotFoundError(
+            f"{folder}: neither {OURS_STATS} (our render) nor {REFERENCE_TIMING} (the reference) is there; "
+            "run the render or reference stage first"
+        )
+
+    def _array(self, name: str) -> np.ndarray | None:
+        path = self.folder / name
+        return np.load(path, allow_pickle=False) if path.is_file() else None
+
+    def steady(self) -> np.ndarray | None:
+        """The steady image (H, W, 3), or None when the stage wrote none."""
+        return self._array(STEADY)
+
+    def frames(self) -> np.ndarray | None:
+        """The frames (T, H, W, 3) float32 as written (gate or bins), or None."""
+        return self._array(FRAMES)
+
+    def frames_as_bins(self) -> np.ndarray | None:
+        """The frames as bin integrals, comparable between renderers."""
+        frames = self.frames()
+        if frames is None or self.axis is None:
+            return frames
+        return self.axis.as_bins(frames)
+
+
+__all__ = ["FrameAxis", "RenderOutputs", "OURS_STATS", "REFERENCE_TIMING", "STEADY", "FRAMES"]

@@ -1,0 +1,8 @@
+"""Our PTPB renderer from Python: ``render(scene, settings)``, its settings, checkpoints and stage.
+
+The public API is re-exported here (``from render.ptpb import render``); the compiled core is the
+private module ``render._core``."""
+
+from render.ptpb.api import RenderResult, core_inputs, memory_bytes, render, resolve_settings, scene_bounding_sphere
+
+__all__ = ["RenderResult", "core_inputs", "memory_bytes", "render", "resolve_settings", "scene_bounding_sphere"]

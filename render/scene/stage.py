@@ -1,0 +1,58 @@
+"""The `scene` stage: write the scene folder (scene.json, ptpb_scene.json, meshes/, optics.json)
+from the config's scene section and the geometry stage's mesh (render/scene/build.py)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from pipeline.atomic import write_json_atomic
+from pipeline.schema.scene import SceneConfig
+from render.scene import optics as optics_mod
+from render.scene.build import build_scene
+from render.scene.model import to_ptpb_core
+
+log = logging.getLogger(__name__)
+
+
+def run_scene_stage(
+    cfg: SceneConfig, out_dir: Path, *, geometry_dir: Path | None = None, site: dict | None = None
+) -> dict:
+    """Build and write the scene folder; return a small summary."""
+    out_dir = Path(out_dir)
+    scene, media = build_scene(cfg, out_dir, geometry_dir=geometry_dir, site=site)
+    optics_report = {
+        key: {"medium": m.to_dict(), "derived": optics_mod.derived_quantities(m).to_dict()} for key, m in media.items()
+    }
+    write_json_atomic(out_dir / "optics.json", optics_report)
+    core, omitted = to_ptpb_core(scene)
+    for item in omitted:
+        log.warning("PTPB scene: %s", item)
+    write_json_atomic(out_dir / "ptpb_scene.json", core)
+    scene.notes.extend(f"PTPB: {item}" for item in omitted)
+    scene.save(out_dir / "scene.json")
+    film = scene.film
+    return {
+        "camera_origin": list(scene.camera.origin),
+        "camera_target": list(scene.camera.target),
+        "bounding_radius_m": scene.bounding_sphere["radius"],
+        "film": {
+            "mode": film.mode,
+            "temporal_bins": film.temporal_bins,
+            "start_opl": film.start_opl,
+            "bin_width_opl": film.bin_width_opl,
+            "frame_mode": film.frame_mode,
+        },
+        "media": {
+            k: {
+                "sigma_s": list(m.sigma_s),
+                "sigma_a": list(m.sigma_a),
+                "g": m.render_g,
+                "form": m.form,
+                "diffuse_albedo": optics_report[k]["derived"]["diffuse_albedo"],
+                "efolding_depth_m": optics_report[k]["derived"]["efolding_depth"],
+            }
+            for k, m in media.items()
+        },
+        "omitted_by_ptpb": omitted,
+    }
