@@ -19,14 +19,16 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Debian packages: compiler and Python headers, Embree 3 for the ray engine and TBB (its scheduler,
 # which the beam BVH build limits to the render's threads), LLVM 19 for Mitsuba's llvm_ad_rgb
 # variant (older LLVMs crash it), OSMesa/EGL for pyvista's off-screen rendering, Chromium to check
-# the HTML report, and git for manifests' revisions.
+# the HTML report, git for manifests' revisions, and clang-format to check the core's formatting.
 APT_PACKAGES := build-essential git python3 python3-venv python3-dev libembree-dev libtbb-dev libllvm19 \
-	libosmesa6 libegl1 libgl1 libglx-mesa0 libxrender1 chromium
+	libosmesa6 libegl1 libgl1 libglx-mesa0 libxrender1 chromium clang-format
 
 CORE_SOURCES := $(shell find render/core -name '*.cpp' -o -name '*.hpp' -o -name 'CMakeLists.txt') CMakeLists.txt
 PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find pipeline geometry render -name '__init__.py')
 
-.PHONY: help setup demo test test-all test-cpp test-py bench sweep sanitize clean distclean
+CORE_FORMATTED := $(shell find render/core -name '*.cpp' -o -name '*.hpp')
+
+.PHONY: help setup demo lint test test-all test-cpp test-py bench sweep sanitize clean distclean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  make %-10s %s\n", $$1, $$2}'
@@ -36,7 +38,14 @@ setup: $(STAMPS)/package ## Install Debian packages and .venv with the package b
 demo: setup ## Run the whole pipeline on configs/demo.yaml (CONFIG=... for another)
 	$(PY) -m pipeline run $(CONFIG)
 
-test: setup ## Run the C++ tests (ctest) and the Python tests (pytest), except those marked slow
+lint: setup ## Lint and format checks (ruff, clang-format) and type checks (mypy); make test runs it first
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	clang-format --dry-run --Werror $(CORE_FORMATTED)
+	$(VENV)/bin/mypy
+
+test: setup ## Lint, then the C++ tests (ctest) and the Python tests (pytest), except those marked slow
+	$(MAKE) lint
 	$(MAKE) test-cpp
 	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
 
