@@ -1,4 +1,4 @@
-"""Settings of our Progressive Transient Photon Beams renderer (ptpb.md §6 "Proposed keys")."""
+"""Settings of our Progressive Transient Photon Beams renderer (render/core/DESIGN.md §6 "Proposed keys")."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ class PTPBConfig(StrictModel):
     )
     initial_surface_radius: BeamRadius = Field(
         default_factory=lambda: BeamRadius(value=2.0, unit="pixel_footprint"),
-        description="r_0, the initial 2D disk kernel radius of the surface photons on diffuse surfaces (ptpb.md §7) [see unit].",
+        description="r_0, the initial 2D disk kernel radius of the surface photons on diffuse surfaces (render/core/DESIGN.md §7) [see unit].",
     )
     surface_alpha: float | None = Field(
         None,

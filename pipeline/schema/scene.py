@@ -1,6 +1,6 @@
 """Settings of the scene stage (camera, lights, media, objects, film) and of the Mitsuba reference stage.
 
-Conventions (ptpb.md §1): metres, z up, x east, y north; time is optical path length (OPL) in metres;
+Conventions (render/core/DESIGN.md §1): metres, z up, x east, y north; time is optical path length (OPL) in metres;
 light units are Mitsuba's (irradiance W m-2, radiance W m-2 sr-1, intensity W sr-1). Key paths are
 scene.<field> and reference.<field>.
 """
@@ -91,7 +91,7 @@ class SunConfig(StrictModel):
     reference_point: Vec3 | None = Field(
         None,
         description="Pins the sun's tau = 0 plane to this point; null = nearest point of the scene bounding "
-        "sphere (ptpb.md §1) [m].",
+        "sphere (render/core/DESIGN.md §1) [m].",
     )
     disk_distance_radii: float = Field(
         1000.0,
@@ -140,7 +140,7 @@ class PulseLightConfig(StrictModel):
 
 
 class PhysicalOpticsConfig(StrictModel):
-    """Physical inputs of snow_optics.md §3, §6, §7 (key path scene.media.<id>.physical.<field>)."""
+    """Physical inputs of render/scene/OPTICS.md §3, §6, §7 (key path scene.media.<id>.physical.<field>)."""
 
     kind: Literal["snow", "bubbly_ice", "clear_ice"] = Field("snow", description="Material model [-].")
     density: float = Field(550.0, gt=0, le=917, description="Bulk density (snow, bubbly ice) [kg m-3].")
@@ -191,7 +191,7 @@ class MediumConfig(StrictModel):
     coefficients: CoefficientsConfig | None = Field(None, description="Explicit sigma_s, sigma_a, g [-].")
     form: Literal["full", "diffraction_removed", "isotropic_reduced"] | None = Field(
         None,
-        description="Phase-function form (snow_optics.md §4); null = diffraction_removed for snow and bubbly ice, "
+        description="Phase-function form (render/scene/OPTICS.md §4); null = diffraction_removed for snow and bubbly ice, "
         "full for clear ice, thesis sets and explicit coefficients [-].",
     )
     boundary: Literal["null", "dielectric"] | None = Field(

@@ -1,10 +1,10 @@
 """The neutral scene (render/scene/model.py) as a Mitsuba 3 / mitransient scene dict, and the limits of the reference.
 
-Conventions, on top of render/scene/model.py and ptpb.md §1-§2:
+Conventions, on top of render/scene/model.py and render/core/DESIGN.md §1-§2:
 
 - Steady images are ``volpath``; transient ones ``transient_prbvolpath`` with ``camera_unwarp: False``,
   so τ includes the camera leg. Frames are bins (``transient_hdr_film``): W m-2 sr-1 per bin, returned
-  as (T, H, W, 3) float32 C-contiguous (mitransient's own array is (H, W, T, C), ptpb.md §2).
+  as (T, H, W, 3) float32 C-contiguous (mitransient's own array is (H, W, T, C), render/core/DESIGN.md §2).
 - Inside null boundaries mitransient moves at c (OPL = geometric length); only a dielectric BSDF
   changes its η.
 - Media: Mitsuba's ``rgb`` spectra must lie in [0, 1], so sigma_t is passed as sigma_t / max(sigma_t)
@@ -339,7 +339,7 @@ def check_reference_limits(scene: Scene, *, transient: bool, force: bool) -> lis
             warnings.append(
                 "mitransient's directional sun is not a plane wavefront: next-event estimation puts the "
                 "sun 2 R_s behind every shading point, so direct-sun τ is 2 R_s plus the camera leg "
-                "everywhere; do not compare sun timing with it (ptpb.md §11)"
+                "everywhere; do not compare sun timing with it (render/core/DESIGN.md §11)"
             )
         if _suns(scene, "disk") and _timed_emitters(scene):
             warnings.append(

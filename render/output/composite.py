@@ -166,7 +166,7 @@ def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir:
     written.update(streak_images(frames, film, cfg, out_dir))
     reference_frames = RenderOutputs.read(reference_dir).frames() if reference_dir is not None else None
     if reference_frames is not None and reference_frames.shape == frames.shape:
-        # mitransient's frames are bin integrals; gate frames are densities per metre (ptpb.md §2).
+        # mitransient's frames are bin integrals; gate frames are densities per metre (render/core/DESIGN.md §2).
         ours_as_bins = film.as_bins(frames)
         bins_film = film.in_bins()
         written.update(

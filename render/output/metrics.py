@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-RELMSE_EPSILON = 1e-2  # ptpb.md §10: keeps near-black reference pixels from dominating
+RELMSE_EPSILON = 1e-2  # render/core/DESIGN.md §10: keeps near-black reference pixels from dominating
 
 
 def _pair(estimate, reference) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@
      "film": {"frame_mode": "steady"|"bins"|"gate", "temporal_bins", "start_opl" (m), "bin_width_opl" (m)}}
 
 Free flights sample the channel-average mixture of the three exponentials and carry all three
-channels (no hero wavelength), as in ptpb.md §3.
+channels (no hero wavelength), as in render/core/DESIGN.md §3.
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def render(
     and, past 10^4 iterations, their float32 rounding remainders ``frames_carry``, the
     ``stats`` counters, ``snapshot_iterations``/``snapshot_seconds``/``snapshots``) every
     ``checkpoint_every_iterations`` iterations or ``checkpoint_every_s`` seconds and once more when
-    the run is cancelled; ``resume=state`` continues from one, bit-identically (ptpb.md §9)."""
+    the run is cancelled; ``resume=state`` continues from one, bit-identically (render/core/DESIGN.md §9)."""
     from render import _core
 
     scene, core_settings = core_inputs(scene, settings, **overrides)

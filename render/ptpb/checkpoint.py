@@ -4,7 +4,7 @@
 A checkpoint holds the sums (steady, early and late in float64, the frames in float32 with, past
 10^4 iterations, their float32 rounding remainders ``frames_carry``), the counters and timings, the
 steady snapshots, the completed iteration count, the bandwidths of the last iteration and the
-seed. Random streams are keyed by (seed, iteration, index) (ptpb.md §9), so a render resumed from
+seed. Random streams are keyed by (seed, iteration, index) (render/core/DESIGN.md §9), so a render resumed from
 it ends with the same bits as one that was never interrupted.
 
 Its fingerprint is the scene (meshes by SHA-256) and every setting that changes what an iteration

@@ -38,7 +38,7 @@ def _tan_half_fov_x(cam: dict) -> float:
 
 def _resolve_radius(spec: BeamRadius, scene: dict, centre: np.ndarray, radius: float) -> float:
     """A kernel radius in metres: absolute, a fraction of the scene radius, or pixel footprints
-    2 z tan(fov_x/2) / W at the distance z from the camera to the scene centre (ptpb.md §6)."""
+    2 z tan(fov_x/2) / W at the distance z from the camera to the scene centre (render/core/DESIGN.md §6)."""
     if spec.unit == "m":
         return spec.value
     if spec.unit == "scene_radius":
@@ -49,7 +49,7 @@ def _resolve_radius(spec: BeamRadius, scene: dict, centre: np.ndarray, radius: f
 
 
 def _resolve_half_width(spec: TimeHalfWidth, n: float, radius_m: float, bin_width: float) -> float:
-    """A temporal half-width in metres of OPL, with the floor of half a bin (ptpb.md §6)."""
+    """A temporal half-width in metres of OPL, with the floor of half a bin (render/core/DESIGN.md §6)."""
     if spec.unit == "m_opl":
         t0 = spec.value
     elif spec.unit == "bin_width":
@@ -60,7 +60,7 @@ def _resolve_half_width(spec: TimeHalfWidth, n: float, radius_m: float, bin_widt
 
 
 def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
-    """Turn a PTPBConfig into the core's settings dict: units resolved to metres (ptpb.md §6).
+    """Turn a PTPBConfig into the core's settings dict: units resolved to metres (render/core/DESIGN.md §6).
 
     Beams and surface photons (§7) run separate schedules: R_0, T_0, alpha for the beams and
     r_0, their own T_0 (the same rule with r_0 in place of R_0) and surface_alpha for surfaces."""

@@ -89,7 +89,7 @@ def medium_optics(cfg: MediumConfig, medium_id: str) -> optics_mod.MediumOptics:
                 medium_id,
                 "explicit coefficients",
             )
-        # Grain and bubble media render in the diffraction-removed form by default (snow_optics.md §4);
+        # Grain and bubble media render in the diffraction-removed form by default (OPTICS.md §4);
         # literal sets, explicit coefficients and clear ice stay as given.
         granular = base.inputs.get("ssa_m2_kg") is not None or base.inputs.get("bubble_radius_m") is not None
         medium = optics_mod.reduce(base, cfg.form or ("diffraction_removed" if granular else "full"))

@@ -196,7 +196,7 @@ def bounding_sphere_of_points(points: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def sun_tau_origin(to_sun: np.ndarray, centre: np.ndarray, radius: float, reference_point=None) -> np.ndarray:
-    """A point of the tau = 0 plane: P0 = C + R_s s, or the pinned reference point (ptpb.md §1)."""
+    """A point of the tau = 0 plane: P0 = C + R_s s, or the pinned reference point (render/core/DESIGN.md §1)."""
     if reference_point is not None:
         return np.asarray(reference_point, dtype=np.float64)
     return np.asarray(centre, dtype=np.float64) + radius * np.asarray(to_sun, dtype=np.float64)

@@ -1,4 +1,4 @@
-"""Optical properties of snow, firn and ice as homogeneous RGB media (snow_optics.md).
+"""Optical properties of snow, firn and ice as homogeneous RGB media (OPTICS.md).
 
 Pure formulas first, preset files at the edge. Every triple is (R, G, B) = (640, 530, 470) nm and
 every coefficient is per metre unless a preset says otherwise (the thesis sets, section 9).
@@ -98,7 +98,7 @@ class MediumOptics:
 
     @property
     def region_ior(self) -> float:
-        """Group index of the region inside the boundary: 1 (air) when index matched (ptpb.md §1)."""
+        """Group index of the region inside the boundary: 1 (air) when index matched (render/core/DESIGN.md §1)."""
         return self.render_ior if self.boundary == "dielectric" else 1.0
 
     def to_dict(self) -> dict:
@@ -201,7 +201,7 @@ def derive_snow(
         "null",
         "full",
         name,
-        "snow_optics.md §3: grains of ice in air (Kokhanovsky & Zege 2004, TARTES)",
+        "OPTICS.md §3: grains of ice in air (Kokhanovsky & Zege 2004, TARTES)",
         inputs,
     )
 
@@ -240,7 +240,7 @@ def derive_bubbly_ice(
         "dielectric",
         "full",
         name,
-        "snow_optics.md §6: air bubbles in ice",
+        "OPTICS.md §6: air bubbles in ice",
         inputs,
     )
 
@@ -257,7 +257,7 @@ def derive_clear_ice(
         "dielectric",
         "full",
         name,
-        "snow_optics.md §6: clear ice",
+        "OPTICS.md §6: clear ice",
         {"haze_sigma_s_m": haze_sigma_s},
     )
 
@@ -290,7 +290,7 @@ def _thesis_from_values(
         "dielectric",
         "full",
         name,
-        f"Chukir 2021 (snow_optics.md §9), literal, per thesis unit / {metres_per_unit} m",
+        f"Chukir 2021 (OPTICS.md §9), literal, per thesis unit / {metres_per_unit} m",
         {"metres_per_unit": metres_per_unit},
     )
 

@@ -12,7 +12,7 @@ from render.scene.shapes import box_mesh, quad_mesh
 
 @pytest.fixture
 def scene_dir(tmp_path):
-    """tmp_path holding ptpb_scene.json and its mesh: the cube of ptpb.md §10 test 4 (null boundary)
+    """tmp_path holding ptpb_scene.json and its mesh: the cube of render/core/DESIGN.md §10 test 4 (null boundary)
     under a 0.5 m area light, 12 x 10 pixels, 30 bins of 5 cm from 3.5 m."""
     cv, cf = box_mesh()
     lv, lf = quad_mesh(center=(0, 1.5, 0), u=(0.25, 0, 0), v=(0, 0, 0.25))

@@ -21,7 +21,7 @@ from render.scene.shapes import box_mesh, quad_mesh
 
 
 def scene(medium: dict | None = None, box=None, res: int = 12, bins: int = 16) -> dict:
-    """A 1 m box of medium under a 0.5 m area light, seen from 3 m (ptpb.md §10 test 4, smaller)."""
+    """A 1 m box of medium under a 0.5 m area light, seen from 3 m (render/core/DESIGN.md §10 test 4, smaller)."""
     cv, cf = box if box is not None else box_mesh()
     lv, lf = quad_mesh(center=(0, 1.5, 0), u=(0.25, 0, 0), v=(0, 0, 0.25))
     return {

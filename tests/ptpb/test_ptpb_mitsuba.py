@@ -1,4 +1,4 @@
-"""Steady comparison with Mitsuba 3 volpath on ptpb.md §10 test 4's cube, reduced for CI:
+"""Steady comparison with Mitsuba 3 volpath on render/core/DESIGN.md §10 test 4's cube, reduced for CI:
 24x24 pixels, Mitsuba at 16384 spp, ours with 32 iterations of 100k light paths (R_0 = 1 cm)."""
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ def test_steady_cube_mean_and_convergence_against_mitsuba_volpath():
     assert np.all(np.diff(rel[its >= 8][::2]) < 0), rel  # 8, 24, 40, 56 iterations: falling
     slope = np.polyfit(np.log(its[upper]), np.log(rel[upper]), 1)[0]
     print("slope over 16-64 iterations", slope)
-    # Theory for the 1D beam kernel in bins/steady mode: relMSE ~ N^-alpha with alpha = 4/5 (ptpb.md §6).
+    # Theory for the 1D beam kernel in bins/steady mode: relMSE ~ N^-alpha with alpha = 4/5 (render/core/DESIGN.md §6).
     assert abs(slope - (-0.8)) < 0.15, slope
 
 
@@ -139,7 +139,7 @@ def test_transient_bins_match_mitransient_frame_by_frame():
     frames_ref = np.mean([frames for frames, _ in refs], axis=0)
     steady_ref = np.mean([steady for _, steady in refs], axis=0)
     assert frames_ref.shape == (film["temporal_bins"], RES, RES, 3)
-    # Both sides bin the same energy: the frames sum to each side's steady image (ptpb.md §10 test 1).
+    # Both sides bin the same energy: the frames sum to each side's steady image (render/core/DESIGN.md §10 test 1).
     assert frames_ref.sum() == pytest.approx(steady_ref.sum(), rel=3e-3)  # less the tail after end_opl
 
     scene = cube_scene("bins", res=3 * RES)

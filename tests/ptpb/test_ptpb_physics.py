@@ -1,4 +1,4 @@
-"""Acceptance tests of the PTPB renderer against physics (ptpb.md §10 tests 1–3, 7)."""
+"""Acceptance tests of the PTPB renderer against physics (render/core/DESIGN.md §10 tests 1–3, 7)."""
 
 from __future__ import annotations
 

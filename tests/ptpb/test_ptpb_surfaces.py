@@ -1,4 +1,4 @@
-"""Surface photons on diffuse surfaces (ptpb.md §7) against closed-form radiance and timing.
+"""Surface photons on diffuse surfaces (render/core/DESIGN.md §7) against closed-form radiance and timing.
 
 Every scene here is lit by a delta light with no media in the way (or a pure absorber, or a
 glass slab), so the radiance of a Lambertian plane is known exactly: L = E_perp ρ / π, with
@@ -97,7 +97,7 @@ def centre(a: np.ndarray, k: int) -> np.ndarray:
 
 
 def sun_tau(sc: dict, x: np.ndarray, theta_deg: float) -> np.ndarray:
-    """Arrival OPL of unscattered sunlight at x in air: R_s − (x − C)·s (ptpb.md §1)."""
+    """Arrival OPL of unscattered sunlight at x in air: R_s − (x − C)·s (render/core/DESIGN.md §1)."""
     c, r_s = scene_bounding_sphere(sc)
     th = math.radians(theta_deg)
     s = np.array([math.sin(th), 0.0, math.cos(th)])

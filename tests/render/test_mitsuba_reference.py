@@ -301,7 +301,7 @@ def test_disk_sun_frames_on_the_ptpb_time_axis(tmp_path):
     mesh = shapes.box_mesh((-1, -1, -0.2), (1, 1, 0))
     centre, radius = bounding_sphere_of_points(mesh[0])
     s = np.array([0.0, 0.0, 1.0])
-    p0 = centre + radius * s  # ptpb.md §1: the τ = 0 plane touches the bounding sphere on the sun's side
+    p0 = centre + radius * s  # render/core/DESIGN.md §1: the τ = 0 plane touches the bounding sphere on the sun's side
     scene = make_scene(
         tmp_path,
         [("plane", mesh, {"kind": "diffuse", "albedo": (0.5, 0.5, 0.5)})],

@@ -1,4 +1,4 @@
-"""Optical presets and formulas of render/scene/optics.py against the tables of snow_optics.md.
+"""Optical presets and formulas of render/scene/optics.py against the tables of render/scene/OPTICS.md.
 
 Every expected number below is copied from /work/shared/reference/snow_optics.md (the section is
 cited next to each table). Triples are (R, G, B) = (640, 530, 470) nm.
@@ -47,7 +47,7 @@ def _assert_rel(computed, expected, rel: float, what: str) -> None:
 
 
 # ------------------------------------------------------------------ section 8: preset table
-# snow_optics.md §8 "Preset table (physically derived)", printed values. sigma_s in m-1 (full form, with
+# render/scene/OPTICS.md §8 "Preset table (physically derived)", printed values. sigma_s in m-1 (full form, with
 # diffraction), sigma_a in m-1, z_e in cm, ell* (transport mean free path) in mm, r_opt in m.
 # For clear ice the z_e column is "1/alpha: 420 / 2100 / 4500" cm and the r_d column is the 1 m slab
 # transmittance "T(1 m) slab 0.759 / 0.920 / 0.942"; it has no r_d and no ell* ("-").
@@ -199,7 +199,7 @@ def test_bubbly_ice_section_6():
 
 
 # ------------------------------------------------------------------ section 9: thesis sets
-# snow_optics.md §9, Table 6.1 (sets 1-5) and 6.2 (set 6): Albedo (used as HG g), Rozptyl = sigma_s,
+# render/scene/OPTICS.md §9, Table 6.1 (sets 1-5) and 6.2 (set 6): Albedo (used as HG g), Rozptyl = sigma_s,
 # Index lomu = IOR (smooth dielectric), Absorpce = sigma_a; per thesis scene unit.
 THESIS_ABSORPTION = (0.23450, 0.047081, 0.024647)
 SECTION_9_SETS = {
@@ -382,7 +382,7 @@ def test_snow_absorption_weak_limit_section_3():
 
 
 # ------------------------------------------------------------------ section 7: impurities
-# snow_optics.md §7, penitente snow (rho = 550, SSA = 3): pure r_d 0.903 / 0.956 / 0.969, then per impurity.
+# render/scene/OPTICS.md §7, penitente snow (rho = 550, SSA = 3): pure r_d 0.903 / 0.956 / 0.969, then per impurity.
 # The table prints 3 decimals from MAC triples that are themselves rounded ([uncertain] values), so the
 # tolerance is 0.001 absolute (half a printed unit plus the same again for the rounded MAC inputs).
 IMPURITY_TOL = 1e-3

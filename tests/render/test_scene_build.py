@@ -76,7 +76,7 @@ def test_scene_folder_round_trips_and_holds_watertight_meshes(tmp_path):
     core = json.loads((tmp_path / "ptpb_scene.json").read_text())
     assert core["shapes"][0]["mesh"] == "meshes/block.ply" and core["film"]["frame_mode"] == "bins"
     derived = json.loads((tmp_path / "optics.json").read_text())["snow"]["derived"]
-    # penitente snow r_d (snow_optics.md §8): 0.903 / 0.956 / 0.969.
+    # penitente snow r_d (render/scene/OPTICS.md §8): 0.903 / 0.956 / 0.969.
     np.testing.assert_allclose(derived["diffuse_albedo"], [0.903, 0.956, 0.969], atol=0.002)
     assert summary["media"]["snow"]["form"] == "diffraction_removed"
 
