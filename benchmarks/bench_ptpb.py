@@ -491,7 +491,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="small budgets: checks the script, not the figures")
     parser.add_argument("--memory-worker", help=argparse.SUPPRESS)
     args = parser.parse_args()
-    os.chdir(REPO)  # the config's mesh paths are relative to the repository root
+    os.chdir(REPO)  # results and caches are written under the repository
     if args.memory_worker:
         memory_worker(json.loads(args.memory_worker))
         return

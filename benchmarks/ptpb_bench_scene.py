@@ -2,7 +2,7 @@
 
 - ``bench_scene(config)`` builds the scene folder (scene.json, ptpb_scene.json, meshes) once per
   config: ``benchmarks/results/cache/scene-<hash of the scene section, the seed and the meshes>/``.
-  Mesh paths in the config are relative to the repository root.
+  Mesh paths in the config are relative to the config file's folder (pipeline/config.py).
 - ``reference(scene_dir, cfg)`` renders mitransient's transient_prbvolpath at ``reference.transient_spp``
   as two independent halves (frames and its steady image) and keeps them in
   ``cache/reference-<hash>.npz``, keyed by the scene files, the spp and the Mitsuba versions. Two halves

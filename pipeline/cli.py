@@ -37,11 +37,37 @@ def _load_or_exit(config_path: Path, overrides: list[str] | None):
 
 
 @app.command()
-def validate(config: Path = CONFIG_ARG, overrides: list[str] | None = SET_OPTION) -> None:
+def validate(
+    config: Path | None = typer.Argument(None, help="YAML config file (not needed with --explain)."),
+    overrides: list[str] | None = SET_OPTION,
+    explain: str | None = typer.Option(
+        None, "--explain", metavar="KEY", help="Print one key's type, default, unit and description, and exit."
+    ),
+) -> None:
     """Validate CONFIG and print the resolved config (bases merged, defaults filled in)."""
+    if explain is not None:
+        from pipeline.reference import explain as explain_key
+
+        try:
+            typer.echo(explain_key(explain), nl=False)
+        except KeyError as exc:
+            typer.echo(f"error: {exc.args[0]}", err=True)
+            raise typer.Exit(code=2) from None
+        return
+    if config is None:
+        typer.echo("error: give a CONFIG file to validate (or --explain KEY)", err=True)
+        raise typer.Exit(code=2)
     cfg = _load_or_exit(config, overrides)
     typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False), nl=False)
     typer.echo(f"# {config}: valid", err=True)
+
+
+@app.command()
+def docs() -> None:
+    """Regenerate docs/config-reference.md from the config schema."""
+    from pipeline.reference import write
+
+    typer.echo(f"wrote {write()}")
 
 
 @app.command()

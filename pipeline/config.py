@@ -14,9 +14,12 @@ what is allowed.
 from __future__ import annotations
 
 import copy
+import difflib
 import hashlib
 import json
 import re
+import types
+import typing
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -105,23 +108,65 @@ def parse_override(assignment: str) -> tuple[list[str], Any]:
     return key.strip().split("."), value
 
 
+def _list_index(node: list, key: str, assignment: str) -> int:
+    if not re.fullmatch(r"-?[0-9]+", key) or not -len(node) <= int(key) < len(node):
+        raise ConfigError(
+            f"override '{assignment}': '{key}' is not an item of a list of {len(node)} "
+            f"(use an index from 0 to {len(node) - 1})"
+        )
+    return int(key)
+
+
 def apply_overrides(raw: dict[str, Any], assignments: Iterable[str]) -> dict[str, Any]:
+    """Apply ``key.path=value`` overrides; a number in the path picks an item of a list
+    (``scene.objects.0.medium=ice``), so list items can be changed without repeating the list."""
     result = copy.deepcopy(raw)
     for assignment in assignments:
         keys, value = parse_override(assignment)
-        node = result
+        node: Any = result
         for k in keys[:-1]:
-            if not isinstance(node.get(k), dict):
+            if isinstance(node, list):
+                node = node[_list_index(node, k, assignment)]
+                continue
+            if not isinstance(node.get(k), (dict, list)):
                 node[k] = {}
             node = node[k]
-        node[keys[-1]] = value
+        if isinstance(node, list):
+            node[_list_index(node, keys[-1], assignment)] = value
+        elif isinstance(node, dict):
+            node[keys[-1]] = value
+        else:
+            raise ConfigError(f"override '{assignment}': {'.'.join(keys[:-1])} is a value, not a mapping or a list")
     return result
 
 
 def format_key_path(parts) -> str:
-    """``render.ptpb.api.initial_radius``; odd keys (spaces, dots, empty) are quoted so they stay visible."""
+    """``render.initial_beam_radius``; odd keys (spaces, dots, empty) are quoted so they stay visible."""
     shown = [str(p) if isinstance(p, int) or re.fullmatch(r"[A-Za-z0-9_-]+", str(p)) else repr(str(p)) for p in parts]
     return ".".join(shown) or "(top level)"
+
+
+def _known_keys(loc: tuple) -> list[str]:
+    """The keys the schema allows at ``loc`` (a pydantic error location), for "did you mean"."""
+    from pydantic import BaseModel
+
+    from pipeline.schema import Config
+
+    model: Any = Config
+    for part in loc:
+        if isinstance(model, type) and issubclass(model, BaseModel):
+            field = model.model_fields.get(str(part))
+            if field is None:
+                return []
+            model = field.annotation
+        else:  # a list item or a mapping value: step into the element type
+            args = [a for a in typing.get_args(model) if a is not type(None)]
+            model = args[-1] if args else None
+        while typing.get_origin(model) in (typing.Union, types.UnionType):  # Optional[...]
+            model = next((a for a in typing.get_args(model) if a is not type(None)), None)
+    if isinstance(model, type) and issubclass(model, BaseModel):
+        return list(model.model_fields)
+    return []
 
 
 def format_validation_error(error: ValidationError, source: str) -> str:
@@ -129,7 +174,9 @@ def format_validation_error(error: ValidationError, source: str) -> str:
     for item in error.errors(include_url=False):
         key_path = format_key_path(item["loc"])
         if item["type"] == "extra_forbidden":
-            lines.append(f"  {key_path}: unknown key (value {item['input']!r}); remove it or check its spelling")
+            close = difflib.get_close_matches(str(item["loc"][-1]), _known_keys(item["loc"][:-1]), n=1)
+            hint = f"did you mean '{close[0]}'?" if close else "remove it or check its spelling"
+            lines.append(f"  {key_path}: unknown key (value {item['input']!r}); {hint}")
             continue
         if item["type"] == "missing":
             lines.append(f"  {key_path}: required key is missing")
@@ -156,7 +203,39 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()):
     path = Path(path)
     raw = apply_overrides(load_raw(path), overrides)
     raw.setdefault("name", path.stem)
-    return validate(raw, source=str(path))
+    _resolve_relative_paths(raw, path.resolve().parent)
+    config = validate(raw, source=str(path))
+    check_input_files(config, source=str(path))
+    return config
+
+
+def _resolve_relative_paths(raw: dict[str, Any], folder: Path) -> None:
+    """Mesh paths relative to the config file's folder become absolute, so a run does not depend on
+    the working directory."""
+    scene = raw.get("scene")
+    objects = scene.get("objects") if isinstance(scene, dict) else None
+    for obj in objects if isinstance(objects, list) else []:
+        if isinstance(obj, dict) and isinstance(obj.get("path"), str) and obj["path"]:
+            if not Path(obj["path"]).expanduser().is_absolute():
+                obj["path"] = str((folder / obj["path"]).resolve())
+
+
+def check_input_files(config, source: str = "config") -> None:
+    """Refuse a config whose input files are missing or unreadable, naming the key and the file."""
+    from geometry.meshio import read_mesh
+
+    problems = []
+    for i, obj in enumerate(config.scene.objects):
+        if obj.shape != "ply" or not obj.path:
+            continue
+        try:
+            read_mesh(Path(obj.path).expanduser())
+        except FileNotFoundError as exc:
+            problems.append(f"  scene.objects.{i}.path: {exc} (a relative path is read from the config file's folder)")
+        except (OSError, ValueError) as exc:
+            problems.append(f"  scene.objects.{i}.path: {exc}")
+    if problems:
+        raise ConfigError(f"{source}: {len(problems)} problem(s) with input files:\n" + "\n".join(problems))
 
 
 def subtree(config_dump: Mapping[str, Any], dotted_key: str) -> Any:

@@ -247,7 +247,9 @@ class ObjectConfig(StrictModel):
         0.002, ge=0, le=0.1, description="snowpack: air gap to the penitente mesh, avoids coincident faces [m]."
     )
     path: str | None = Field(
-        None, description="ply: mesh file (absolute, or relative to the working directory) [path]."
+        None,
+        description="ply: mesh file, PLY (ASCII or binary), OBJ or STL; absolute, or relative to the config "
+        "file's folder [path].",
     )
 
     @model_validator(mode="after")
