@@ -162,7 +162,8 @@ class Sweep:
 
 def _sweep_file_errors(path: Path, error: ValidationError, document: dict) -> list[str]:
     """One line per problem; ``points.2.sett`` becomes ``point 'name': sett``."""
-    raw_points = document.get("points") if isinstance(document.get("points"), list) else []
+    points = document.get("points")
+    raw_points = points if isinstance(points, list) else []
     lines = []
     for line in format_validation_error(error, str(path)).splitlines()[1:]:
         match = re.match(r"\s*points\.(\d+)[.:]\s*", line)
@@ -266,7 +267,11 @@ def load_sweep(path: str | Path) -> Sweep:
     name = spec.name or path.stem
     if not re.match(NAME_PATTERN, name):
         raise SweepError(f"{path}: the sweep name '{name}' (the file stem) must match {NAME_PATTERN}; set 'name'")
-    specs = spec.points if spec.points is not None else _grid_points(spec.grid)
+    # Exactly one of the two is set (checked above).
+    if spec.points is not None:
+        specs = spec.points
+    elif spec.grid is not None:
+        specs = _grid_points(spec.grid)
     if not specs:
         raise SweepError(f"{path}: the sweep has no points")
     seen: dict[str, int] = {}

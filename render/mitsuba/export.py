@@ -310,7 +310,7 @@ def check_reference_limits(scene: Scene, *, transient: bool, force: bool) -> lis
         }
     )
     if blocked:
-        ids = sorted({s.interior for s in sealed})
+        ids = sorted({s.interior for s in sealed if s.interior is not None})
         message = (
             f"the {' and '.join(blocked)} light(s) reach the media {', '.join(ids)} only through a smooth "
             f"dielectric boundary (shapes {', '.join(s.name for s in sealed)}): Mitsuba's next-event estimation "

@@ -47,7 +47,8 @@ def _render_passes(
                 break
             n = spp_per_pass if time_budget_s is not None else min(spp_per_pass, spp - done)
             t0 = time.perf_counter()
-            result = mi.render(mi_scene, seed=passes, spp=n)
+            # mitsuba.util.pyi types seed as mi.UInt32 (its own default is 0); the binding takes a Python int.
+            result = mi.render(mi_scene, seed=passes, spp=n)  # type: ignore[arg-type]
             images = [np.array(result[1]), np.array(result[0])] if transient else [np.array(result)]
             images = [im[..., :3].astype(np.float64) * n for im in images]
             sums = images if not sums else [a + b for a, b in zip(sums, images)]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from pipeline.atomic import save_npy_atomic, write_json_atomic
 from pipeline.schema.scene import ReferenceConfig
@@ -16,6 +16,14 @@ from render.output.files import FRAMES, REFERENCE_TIMING, STEADY
 from render.scene.model import Scene
 
 log = logging.getLogger(__name__)
+
+
+class _PassOptions(TypedDict):
+    """The keywords render_steady and render_transient share."""
+
+    spp_per_pass: int
+    time_budget_s: float | None
+    quiet: bool
 
 
 def run_reference_stage(
@@ -32,7 +40,7 @@ def run_reference_stage(
     for w in warnings:
         log.warning("reference: %s", w)
     out_dir.mkdir(parents=True, exist_ok=True)
-    common = {"spp_per_pass": cfg.spp_per_pass, "time_budget_s": cfg.time_budget_s, "quiet": quiet}
+    common: _PassOptions = {"spp_per_pass": cfg.spp_per_pass, "time_budget_s": cfg.time_budget_s, "quiet": quiet}
     timing: dict[str, Any] = {
         "steady": None,
         "transient": None,

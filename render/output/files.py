@@ -58,6 +58,7 @@ class RenderOutputs:
     def read(cls, folder: str | Path) -> RenderOutputs:
         """Read the description of ``folder``; arrays load on demand (``steady()``, ``frames()``)."""
         folder = Path(folder)
+        axis: FrameAxis | None
         if (folder / OURS_STATS).is_file():
             stats = json.loads((folder / OURS_STATS).read_text(encoding="utf-8"))
             axis = FrameAxis(

@@ -56,9 +56,10 @@ window.addEventListener('load', function () {
 
 def markdown_table_to_html(text: str) -> str:
     """Convert the pipe tables we write ourselves into HTML; other lines become paragraphs."""
-    out, rows = [], []
+    out: list[str] = []
+    rows: list[list[str]] = []
 
-    def flush():
+    def flush() -> None:
         if rows:
             header, *body = rows
             out.append("<table><tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in header) + "</tr>")

@@ -80,7 +80,7 @@ def _number(value: Any) -> float | None:
 
 def _compare_errors(files: _PointFiles) -> dict[str, float | None]:
     """relMSE of ours (steady, frames) against the point's own reference, from compare/comparison.csv."""
-    errors = {"relmse_steady": None, "relmse_frames": None}
+    errors: dict[str, float | None] = {"relmse_steady": None, "relmse_frames": None}
     path = files.path("compare", "comparison.csv")
     if path is None:
         return errors

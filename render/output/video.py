@@ -44,7 +44,7 @@ def annotate(
     draw = ImageDraw.Draw(pil)
     size = max(10, image.shape[0] // 28)
     font = ImageFont.load_default(size=size)
-    y = 4
+    y: float = 4  # textbbox gives float coordinates
     for text in ([title] if title else []) + list(lines_top_left):
         box = draw.textbbox((6, y), text, font=font)
         draw.rectangle((box[0] - 3, box[1] - 2, box[2] + 3, box[3] + 2), fill=(0, 0, 0))

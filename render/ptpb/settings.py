@@ -18,7 +18,7 @@ def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:
     allp = np.concatenate(pts)
     lo, hi = allp.min(0), allp.max(0)
     centre = 0.5 * (lo + hi)
-    return centre, float(max(np.linalg.norm(hi - centre), 1e-4))
+    return centre, max(float(np.linalg.norm(hi - centre)), 1e-4)
 
 
 def _tan_half_fov_x(cam: dict) -> float:

@@ -34,6 +34,7 @@ from render.scene.model import (
     Medium,
     Scene,
     Shape,
+    as_vec3,
     bounding_sphere_of_points,
     camera_ray_direction,
     sun_direction,
@@ -74,14 +75,16 @@ def medium_optics(cfg: MediumConfig, medium_id: str) -> optics_mod.MediumOptics:
                     **extra,
                 )
             elif p.kind == "bubbly_ice":
+                if p.bubble_radius is None:
+                    raise ValueError("bubbly_ice needs bubble_radius [m]")
                 base = optics_mod.derive_bubbly_ice(p.density, p.bubble_radius, g=p.g, name=medium_id, **extra)
             else:
                 base = optics_mod.derive_clear_ice(haze_sigma_s=p.haze_sigma_s, g=p.g, name=medium_id)
-        else:
+        elif cfg.coefficients is not None:
             c = cfg.coefficients
             base = optics_mod.MediumOptics(
-                tuple(c.sigma_s),
-                tuple(c.sigma_a),
+                c.sigma_s,
+                c.sigma_a,
                 (c.g,) * 3,
                 (c.ior,) * 3,
                 cfg.boundary or "null",
@@ -89,6 +92,8 @@ def medium_optics(cfg: MediumConfig, medium_id: str) -> optics_mod.MediumOptics:
                 medium_id,
                 "explicit coefficients",
             )
+        else:
+            raise ValueError("give exactly one of preset, physical or coefficients")
         # Grain and bubble media render in the diffraction-removed form by default (OPTICS.md §4);
         # literal sets, explicit coefficients and clear ice stay as given.
         granular = base.inputs.get("ssa_m2_kg") is not None or base.inputs.get("bubble_radius_m") is not None
@@ -189,15 +194,15 @@ def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> None:
 def frame_camera(cfg: CameraConfig, centre: np.ndarray, radius: float) -> Camera:
     """A camera looking at ``centre`` from the configured azimuth and elevation, far enough back
     that the sphere (centre, radius) fits the narrower field of view (times frame_margin)."""
-    probe = Camera((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), tuple(cfg.up), cfg.fov, cfg.width, cfg.height, cfg.fov_axis)
+    probe = Camera((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), cfg.up, cfg.fov, cfg.width, cfg.height, cfg.fov_axis)
     half = math.atan(min(tan_half_fov(probe)))
     distance = cfg.frame_margin * radius / math.sin(half)
     direction = sun_direction(cfg.view_elevation_deg, cfg.view_azimuth_deg)
     origin = np.asarray(centre) + distance * direction
     return Camera(
-        tuple(float(v) for v in origin),
-        tuple(float(v) for v in centre),
-        tuple(cfg.up),
+        as_vec3(origin),
+        as_vec3(centre),
+        cfg.up,
         cfg.fov,
         cfg.width,
         cfg.height,
@@ -270,11 +275,16 @@ def _lights(
                 mesh=f"meshes/{name}.ply",
                 kind="diffuse",
                 albedo=(0.0, 0.0, 0.0),
-                emission=tuple(area.radiance),
+                emission=area.radiance,
             )
         )
     for p in cfg.pulse_lights:
-        light = {"type": p.kind, "position": list(p.position), "intensity": list(p.intensity), "medium": p.medium}
+        light: dict[str, Any] = {
+            "type": p.kind,
+            "position": list(p.position),
+            "intensity": list(p.intensity),
+            "medium": p.medium,
+        }
         if p.kind == "spot":
             light.update(
                 direction=list(p.direction), cutoff_angle_deg=p.cutoff_angle_deg, beam_width_deg=p.beam_width_deg
@@ -376,14 +386,14 @@ def build_scene(
             kind = media[obj.medium].boundary
             scene_shapes.append(Shape(obj.name, f"meshes/{obj.name}.ply", kind, interior=obj.medium))
         else:
-            scene_shapes.append(Shape(obj.name, f"meshes/{obj.name}.ply", "diffuse", albedo=tuple(obj.reflectance)))
+            scene_shapes.append(Shape(obj.name, f"meshes/{obj.name}.ply", "diffuse", albedo=obj.reflectance))
     all_points = np.concatenate([m[1][0] for m in meshes])
     centre, radius = bounding_sphere_of_points(all_points)
     if cfg.camera.placement == "look_at":
         camera = Camera(
-            tuple(cfg.camera.origin),
-            tuple(cfg.camera.target),
-            tuple(cfg.camera.up),
+            cfg.camera.origin,
+            cfg.camera.target,
+            cfg.camera.up,
             cfg.camera.fov,
             cfg.camera.width,
             cfg.camera.height,

@@ -44,8 +44,10 @@ SCENE_VERSION = 1
 Vec3 = tuple[float, float, float]
 
 
-def _vec(x) -> Vec3:
-    return tuple(float(v) for v in np.asarray(x, dtype=np.float64).reshape(3))  # type: ignore[return-value]
+def as_vec3(x) -> Vec3:
+    """Three numbers (a list, tuple or array of 3) as a triple of Python floats."""
+    px, py, pz = np.asarray(x, dtype=np.float64).reshape(3)
+    return float(px), float(py), float(pz)
 
 
 @dataclass
@@ -134,17 +136,17 @@ class Scene:
                 f"not a {SCENE_FORMAT} v{SCENE_VERSION} document "
                 f"(format={data.get('format')!r}, version={data.get('version')!r})"
             )
-        camera = Camera(**{**data["camera"], **{k: _vec(data["camera"][k]) for k in ("origin", "target", "up")}})
+        camera = Camera(**{**data["camera"], **{k: as_vec3(data["camera"][k]) for k in ("origin", "target", "up")}})
         media = {
-            k: Medium(**{**m, **{q: _vec(m[q]) for q in ("sigma_s", "sigma_a", "g_rgb", "material_ior_rgb")}})
+            k: Medium(**{**m, **{q: as_vec3(m[q]) for q in ("sigma_s", "sigma_a", "g_rgb", "material_ior_rgb")}})
             for k, m in data["media"].items()
         }
         shapes = [
             Shape(
                 **{
                     **s,
-                    "albedo": _vec(s["albedo"]) if s.get("albedo") is not None else None,
-                    "emission": _vec(s["emission"]) if s.get("emission") is not None else None,
+                    "albedo": as_vec3(s["albedo"]) if s.get("albedo") is not None else None,
+                    "emission": as_vec3(s["emission"]) if s.get("emission") is not None else None,
                 }
             )
             for s in data["shapes"]
@@ -335,6 +337,7 @@ __all__ = [
     "Medium",
     "Shape",
     "Scene",
+    "as_vec3",
     "sun_direction",
     "bounding_sphere_of_points",
     "sun_tau_origin",

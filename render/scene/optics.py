@@ -15,10 +15,10 @@ every coefficient is per metre unless a preset says otherwise (the thesis sets, 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 import yaml
@@ -40,13 +40,20 @@ THESIS_SET_NAMES = tuple(f"thesis_set_{k}" for k in range(1, 7))
 Boundary = Literal["null", "dielectric"]
 Form = Literal["full", "diffraction_removed", "isotropic_reduced"]
 Triple = tuple[float, float, float]
+T = TypeVar("T")
+
+
+def _three(values: Iterable[T]) -> tuple[T, T, T]:
+    """A per-channel iterable as an RGB triple (exactly three items)."""
+    red, green, blue = values
+    return red, green, blue
 
 
 def _triple(value, name: str) -> Triple:
     arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,))
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {value}")
-    return tuple(float(x) for x in arr)  # type: ignore[return-value]
+    return _three(float(x) for x in arr)
 
 
 @dataclass(frozen=True)
@@ -80,11 +87,11 @@ class MediumOptics:
 
     @property
     def sigma_t(self) -> Triple:
-        return tuple(s + a for s, a in zip(self.sigma_s, self.sigma_a))  # type: ignore[return-value]
+        return _three(s + a for s, a in zip(self.sigma_s, self.sigma_a))
 
     @property
     def single_scattering_albedo(self) -> Triple:
-        return tuple(s / t if t > 0 else 0.0 for s, t in zip(self.sigma_s, self.sigma_t))  # type: ignore[return-value]
+        return _three(s / t if t > 0 else 0.0 for s, t in zip(self.sigma_s, self.sigma_t))
 
     @property
     def render_g(self) -> float:
@@ -169,9 +176,12 @@ def derive_snow(
     """
     if not 0 < density < RHO_ICE:
         raise ValueError(f"snow density must lie in (0, {RHO_ICE}) kg/m3, got {density}")
-    if (ssa is None) == (optical_radius is None):
+    if ssa is not None and optical_radius is None:
+        r_opt = optical_radius_from_ssa(ssa)
+    elif optical_radius is not None and ssa is None:
+        r_opt = float(optical_radius)
+    else:
         raise ValueError("give exactly one of ssa (m2/kg) or optical_radius (m)")
-    r_opt = optical_radius_from_ssa(ssa) if ssa is not None else float(optical_radius)
     if r_opt <= 0:
         raise ValueError(f"optical radius must be positive, got {r_opt} m")
     alpha = np.asarray(alpha_ice, dtype=np.float64)
@@ -363,7 +373,7 @@ def derived_quantities(optics: MediumOptics) -> DerivedOptics:
     slab_t = (1 - fresnel_r0) ** 2 * np.exp(-t * 1.0)
 
     def floats(x) -> Triple:
-        return tuple(float(v) for v in x)  # type: ignore[return-value]
+        return _three(float(v) for v in x)
 
     return DerivedOptics(
         floats(t),
@@ -373,8 +383,8 @@ def derived_quantities(optics: MediumOptics) -> DerivedOptics:
         floats(z_e),
         floats(r_d),
         floats(ell),
-        tuple(bool(x) for x in diffusive),
-        floats(slab_t),  # type: ignore[arg-type]
+        _three(bool(x) for x in diffusive),
+        floats(slab_t),
     )
 
 

@@ -32,6 +32,8 @@ def run_scene_stage(
     scene.notes.extend(f"PTPB: {item}" for item in omitted)
     scene.save(out_dir / "scene.json")
     film = scene.film
+    if scene.bounding_sphere is None:
+        raise RuntimeError("build_scene returned a scene without its bounding sphere; it always sets one")
     return {
         "camera_origin": list(scene.camera.origin),
         "camera_target": list(scene.camera.target),

@@ -22,6 +22,8 @@ def load_sanitized_core(build_dir: Path) -> Path:
     if not candidates:
         raise SystemExit(f"{build_dir}: no _core*.so; configure it with -DPTPB_BUILD_PYTHON=ON -DPTPB_SANITIZE=ON")
     spec = importlib.util.spec_from_file_location("render._core", candidates[0])
+    if spec is None or spec.loader is None:
+        raise SystemExit(f"{candidates[0]}: Python cannot load it as an extension module")
     module = importlib.util.module_from_spec(spec)
     sys.modules["render._core"] = module
     spec.loader.exec_module(module)
