@@ -63,6 +63,8 @@ def read_mesh(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
         mesh = trimesh.load(str(path), process=False, force="mesh")
     except Exception as exc:  # trimesh raises many types for malformed files
         raise ValueError(f"{path}: not a readable {suffix[1:].upper()} triangle mesh ({exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise ValueError(f"{path}: not a single triangle mesh")
     if suffix == ".stl":
         mesh.merge_vertices()
     vertices = np.asarray(mesh.vertices, dtype=np.float32).reshape(-1, 3)
