@@ -31,7 +31,9 @@ class CompositeConfig(StrictModel):
         gt=0,
         description="Slow-motion factor: video seconds per second of light time [-]. Sets the frame rate from bin_width_opl.",
     )
-    time_unit: Literal["ps", "ns"] = Field("ps", description="Unit of the burned-in time stamp [-].")
+    time_unit: Literal["ps", "ns"] = Field(
+        "ps", description="Unit of every time label (videos, streak images), counted from first light [-]."
+    )
     title: str | None = Field(None, max_length=120, description="Title burned into the videos [-].")
     scale_bar_m: float | None = Field(
         0.5, gt=0, description="Length of the scale bar at the camera target's distance [m]; null hides it."

@@ -48,7 +48,15 @@ def _annotated_video(
         bar_label = f"{cfg.scale_bar_m:g} m"
     for k, frame in enumerate(display):
         big = upscale(frame, cfg.video_min_height)
-        out.append(annotate(big, [format_time(film.centre(k), cfg.time_unit), caption], cfg.title, bar_px, bar_label))
+        out.append(
+            annotate(
+                big,
+                [format_time(film.centre(k) - film.start_opl, cfg.time_unit), caption],
+                cfg.title,
+                bar_px,
+                bar_label,
+            )
+        )
     return np.stack(out)
 
 
@@ -88,8 +96,10 @@ def streak_images(frames: np.ndarray, film: FrameAxis, cfg, out_dir: Path, stem:
     scale = exposure_scale(frames, cfg.exposure_percentile)
     x_path = out_dir / f"{stem}_x.png"
     y_path = out_dir / f"{stem}_y.png"
-    streak_image(frames, "x", row, film.start_opl, film.bin_width_opl, scale, x_path, cfg.tone_curve)
-    streak_image(frames, "y", column, film.start_opl, film.bin_width_opl, scale, y_path, cfg.tone_curve)
+    for axis, index, path in (("x", row, x_path), ("y", column, y_path)):
+        streak_image(
+            frames, axis, index, film.start_opl, film.bin_width_opl, scale, path, cfg.tone_curve, cfg.time_unit
+        )
     return {"streak_x": x_path, "streak_y": y_path}
 
 
@@ -123,7 +133,7 @@ def side_by_side(
                 row,
                 [
                     f"{labels[0]} | {labels[1]} | rel. diff 0 to {cfg.difference_vmax:g}",
-                    format_time(film.centre(k), cfg.time_unit),
+                    format_time(film.centre(k) - film.start_opl, cfg.time_unit),
                 ],
             )
         )

@@ -39,8 +39,10 @@ def streak_image(
     scale: float,
     path: Path,
     curve: ToneCurve = "reinhard",
+    time_unit: str = "ps",
 ) -> list[Path]:
-    """An x–t slice (axis='x', at image row ``index``) or y–t slice (axis='y', at column ``index``)."""
+    """An x–t slice (axis='x', at image row ``index``) or y–t slice (axis='y', at column ``index``); time
+    counts in ``time_unit`` (ps or ns) from the opening of the film window at ``start_opl``, the first light."""
     frames = np.asarray(frames)
     t_count, height, width = frames.shape[:3]
     if axis == "x":
@@ -53,18 +55,18 @@ def streak_image(
         slab, extent_space, label = frames[:, :, index, :], height, f"y (pixel), column {index}"
     else:
         raise ValueError(f"streak axis must be 'x' or 'y', got {axis!r}")
-    t0_ps = start_opl * PS_PER_M_OPL
-    t1_ps = (start_opl + t_count * bin_width_opl) * PS_PER_M_OPL
+    per_unit = PS_PER_M_OPL / (1000.0 if time_unit == "ns" else 1.0)
+    t_end = t_count * bin_width_opl * per_unit
     fig, ax = plt.subplots(figsize=(6, 4.5))
     ax.imshow(
         to_display(slab, scale, curve),
         aspect="auto",
         origin="lower",
-        extent=(0, extent_space, t0_ps, t1_ps),
+        extent=(0, extent_space, 0.0, t_end),
         interpolation="nearest",
     )
     ax.set_xlabel(label)
-    ax.set_ylabel("time (ps)")
+    ax.set_ylabel(f"time since first light ({time_unit}), from OPL {start_opl:.3f} m")
     ax.set_title(f"Streak image ({axis}–t)")
     return _save(fig, path)
 

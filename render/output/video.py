@@ -18,6 +18,7 @@ def opl_to_ps(opl_m: np.ndarray | float) -> np.ndarray | float:
 
 
 def format_time(opl_m: float, unit: str = "ps") -> str:
+    """A burned-in time stamp for ``opl_m`` metres of optical path (callers pass the OPL since first light)."""
     ps = float(opl_to_ps(opl_m))
     if unit == "ns":
         return f"t = {ps / 1000:8.3f} ns"

@@ -89,3 +89,22 @@ def test_picosecond_conversion_uses_the_exact_speed_of_light():
     assert PS_PER_M_OPL == pytest.approx(3335.640952, rel=1e-9)
     assert (SPEED_OF_LIGHT, PS_PER_M_OPL) == (_core.SPEED_OF_LIGHT, _core.PS_PER_M_OPL)  # one constant, two languages
     assert 0.003 * PS_PER_M_OPL == pytest.approx(10.007, abs=1e-3)
+
+
+def test_streak_time_axis_counts_from_first_light_in_the_configured_unit(tmp_path, monkeypatch):
+    from render.output import figures
+
+    made = []
+    subplots = figures.plt.subplots
+
+    def keep(*args, **kwargs):
+        fig, ax = subplots(*args, **kwargs)
+        made.append(ax)
+        return fig, ax
+
+    monkeypatch.setattr(figures.plt, "subplots", keep)
+    frames = np.ones((10, 6, 8, 3), np.float32)
+    streak_images(frames, FrameAxis(25.0, 0.3), CompositeConfig(time_unit="ns"), tmp_path)
+    for ax in made:  # the window opens at OPL 25 m: time 0; 10 bins of 0.3 m last 10.007 ns
+        assert ax.get_ylim() == pytest.approx((0.0, 3.0 / SPEED_OF_LIGHT * 1e9), rel=1e-9)
+        assert ax.get_ylabel().startswith("time since first light (ns)")
