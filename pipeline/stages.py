@@ -6,6 +6,8 @@ Heavy modules are imported inside the functions so that `python -m pipeline vali
 
 from __future__ import annotations
 
+import datetime
+
 from pipeline.runner import Stage, StageContext
 
 
@@ -47,12 +49,36 @@ def render_stage(ctx: StageContext) -> dict:
     )
 
 
+def site_day(config) -> int:
+    """The day of the year (1-365) that the scene is lit on: the last grown day."""
+    g = config.geometry
+    return (g.start_day_of_year + g.days - 2) % 365 + 1
+
+
+def run_title(config) -> str:
+    """A video title from the config: latitude, date and sun, e.g. 'Penitentes at 30.1°S, 3 Jan, sun at
+    10:00 solar time: light in flight'."""
+    latitude = config.geometry.latitude
+    site = f"{abs(latitude):.1f}°{'S' if latitude < 0 else 'N'}"
+    date = datetime.date(2025, 1, 1) + datetime.timedelta(days=site_day(config) - 1)  # a year of 365 days
+    sun = config.scene.sun
+    if not sun.enabled:
+        light = "no sun"
+    elif sun.solar_time_h is not None:
+        hours, minutes = divmod(round(sun.solar_time_h * 60), 60)
+        light = f"sun at {hours:02d}:{minutes:02d} solar time"
+    else:
+        light = f"sun {sun.elevation_deg:g}° high"
+    return f"Penitentes at {site}, {date.day} {date:%b}, {light}: light in flight"
+
+
 def composite_stage(ctx: StageContext) -> dict:
     from render.output.composite import run_composite_stage
 
-    return run_composite_stage(
-        ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"], ctx.config.composite, ctx.out_dir
-    )
+    cfg = ctx.config.composite
+    if cfg.title is None:
+        cfg = cfg.model_copy(update={"title": run_title(ctx.config)})
+    return run_composite_stage(ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"], cfg, ctx.out_dir)
 
 
 def compare_stage(ctx: StageContext) -> dict:
@@ -102,7 +128,7 @@ STAGES: list[Stage] = [
     Stage(
         "composite",
         composite_stage,
-        ("composite",),
+        ("composite", "geometry.latitude", "geometry.start_day_of_year", "geometry.days", "scene.sun"),
         upstream=("render", "reference", "scene"),
         description="transient videos, streak images, ours against the reference",
     ),

@@ -34,7 +34,11 @@ class CompositeConfig(StrictModel):
     time_unit: Literal["ps", "ns"] = Field(
         "ps", description="Unit of every time label (videos, streak images), counted from first light [-]."
     )
-    title: str | None = Field(None, max_length=120, description="Title burned into the videos [-].")
+    title: str | None = Field(
+        None,
+        max_length=120,
+        description="Title burned into the videos; null: made from the site's latitude, the date and the sun [-].",
+    )
     scale_bar_m: float | None = Field(
         0.5, gt=0, description="Length of the scale bar at the camera target's distance [m]; null hides it."
     )

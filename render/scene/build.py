@@ -220,7 +220,7 @@ def site_sun_direction(latitude: float, day_of_year: float, solar_time_h: float)
     if sun[2] <= 0.01:
         raise ValueError(
             f"scene.sun.solar_time_h={solar_time_h}: the sun is below the horizon at latitude "
-            f"{latitude} deg on day {day_of_year:.0f}; choose a daytime hour"
+            f"{latitude} deg on day {(round(day_of_year) - 1) % 365 + 1} of the year; choose a daytime hour"
         )
     return np.asarray(sun, dtype=np.float64)
 

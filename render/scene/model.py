@@ -269,12 +269,14 @@ def pixel_footprint(camera: Camera, distance: float) -> float:
 # ---------------------------------------------------------------- the PTPB core's dict (render/ptpb/api.py)
 
 
-def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str]]:
+def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str], list[str]]:
     """Translate to the core dict of render/ptpb/api.py, with meshes named by ``mesh`` (relative to the
-    scene folder). Returns the dict and the things it had to leave out (spot lights, the sun's size)."""
+    scene folder). Returns the dict, the things it had to leave out (lights the core does not support),
+    and the ones it renders approximately by design (a disk sun as a directional one)."""
     ids = list(scene.media)
     index = {k: i for i, k in enumerate(ids)}
     omitted: list[str] = []
+    approximated: list[str] = []
     shapes = []
     for s in scene.shapes:
         shapes.append(
@@ -308,7 +310,9 @@ def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str]]:
     for light in scene.lights:
         if light["type"] == "sun":
             if light["model"] == "disk":
-                omitted.append(f"sun angular size {light['angular_diameter_deg']} deg (PTPB uses a directional sun)")
+                approximated.append(
+                    f"sun angular size {light['angular_diameter_deg']} deg (PTPB uses a directional sun)"
+                )
             core["directional_lights"].append(
                 {
                     "to_sun": light["to_sun"],
@@ -328,7 +332,7 @@ def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str]]:
             )
         else:
             omitted.append(f"{light['type']} light (not supported by the PTPB core)")
-    return core, omitted
+    return core, omitted, approximated
 
 
 __all__ = [

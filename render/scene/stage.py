@@ -25,11 +25,13 @@ def run_scene_stage(
         key: {"medium": m.to_dict(), "derived": optics_mod.derived_quantities(m).to_dict()} for key, m in media.items()
     }
     write_json_atomic(out_dir / "optics.json", optics_report)
-    core, omitted = to_ptpb_core(scene)
-    for item in omitted:
-        log.warning("PTPB scene: %s", item)
+    core, omitted, approximated = to_ptpb_core(scene)
+    for item in omitted:  # the user can act: remove the light, or rely on the reference for it
+        log.warning("PTPB scene leaves out %s; the reference renders it", item)
+    for item in approximated:  # by design, nothing to change: recorded in scene.json's notes
+        log.info("PTPB scene: %s", item)
     write_json_atomic(out_dir / "ptpb_scene.json", core)
-    scene.notes.extend(f"PTPB: {item}" for item in omitted)
+    scene.notes.extend(f"PTPB: {item}" for item in omitted + approximated)
     scene.save(out_dir / "scene.json")
     film = scene.film
     if scene.bounding_sphere is None:
