@@ -15,6 +15,7 @@
 #include "ptpb/kernels.hpp"
 #include "ptpb/render.hpp"
 #include "ptpb/units.hpp"
+#include "ptpb/validation.hpp"
 
 namespace py = pybind11;
 

@@ -10,6 +10,7 @@
 #include "check.hpp"
 #include "ptpb/beam_accel.hpp"
 #include "ptpb/beam_geometry.hpp"
+#include "ptpb/gather.hpp"
 #include "ptpb/rng.hpp"
 #include "ptpb/sampling.hpp"
 
@@ -17,10 +18,11 @@ using namespace ptpb;
 
 namespace {
 
-// The gather's acceptance test (render.cpp), parallel guard 0.
+// The gather's acceptance test (gather.hpp), with the structures' near-parallel bound as its guard:
+// below it they report beams untested.
 bool exact_pair(const Vec3d& o, const Vec3d& d, double t_max, const Beam& b, double radius) {
   const ClosestApproach ca = closest_approach(o, d, b.origin, b.direction);
-  return ca.sin2 > 1e-4 && ca.t >= 0 && ca.t <= t_max && ca.s >= 0 && ca.s <= b.length && ca.u < radius;
+  return test_beam_pair(ca, t_max, b.length, radius, 1e-4) == PairTest::Inside;
 }
 
 std::vector<Beam> random_beams(KeyedRng& rng, int count, double extent, double max_length) {

@@ -10,6 +10,7 @@
 #include "ptpb/kernels.hpp"
 #include "ptpb/render.hpp"
 #include "ptpb/sampling.hpp"
+#include "ptpb/validation.hpp"
 
 using namespace ptpb;
 
