@@ -5,6 +5,7 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -57,6 +58,12 @@ E choose(const std::string& value, std::initializer_list<std::pair<const char*, 
     names += std::string(names.empty() ? "" : ", ") + name;
   }
   throw std::invalid_argument(key + " must be one of " + names + ", got '" + value + "'");
+}
+
+// A number that may be missing or None: then unset, and the core resolves its default.
+std::optional<double> optional_number(const py::dict& d, const char* key, const std::string& where) {
+  if (!d.contains(key) || d[key].is_none()) return std::nullopt;
+  return get<double>(d, key, 0.0, where);
 }
 
 std::vector<py::dict> dict_list(const py::dict& d, const char* key) {
@@ -228,14 +235,13 @@ RenderSettings parse_settings(const py::dict& d) {
   s.iterations = get<int>(d, "iterations", s.iterations, w);
   s.time_budget_s = get<double>(d, "time_budget_s", 0.0, w);
   s.light_paths_per_iteration = get<std::uint64_t>(d, "light_paths_per_iteration", s.light_paths_per_iteration, w);
-  s.alpha = get<double>(d, "alpha", s.alpha, w);
+  // The schedule's defaults belong to the core (resolve_schedule): missing or None leaves them unset.
+  s.alpha = optional_number(d, "alpha", w);
   s.initial_beam_radius = require_key<double>(d, "initial_beam_radius", w);
-  s.initial_time_half_width = get<double>(d, "initial_time_half_width", s.initial_beam_radius, w);
-  // Surface photons (§7): without their own keys they start from the beams' bandwidths.
-  s.initial_surface_radius = get<double>(d, "initial_surface_radius", s.initial_beam_radius, w);
-  if (d.contains("initial_surface_time_half_width") && !d["initial_surface_time_half_width"].is_none())
-    s.initial_surface_time_half_width = get<double>(d, "initial_surface_time_half_width", 0.0, w);
-  if (d.contains("surface_alpha") && !d["surface_alpha"].is_none()) s.surface_alpha = get<double>(d, "surface_alpha", 0.0, w);
+  s.initial_time_half_width = optional_number(d, "initial_time_half_width", w);
+  s.initial_surface_radius = optional_number(d, "initial_surface_radius", w);
+  s.initial_surface_time_half_width = optional_number(d, "initial_surface_time_half_width", w);
+  s.surface_alpha = optional_number(d, "surface_alpha", w);
   s.surface_normal_cos = get<double>(d, "surface_normal_cos", s.surface_normal_cos, w);
   s.spatial_kernel = choose<SpatialKernel>(get<std::string>(d, "spatial_kernel", "epanechnikov", w),
                                            {{"box", SpatialKernel::Box}, {"epanechnikov", SpatialKernel::Epanechnikov}},
@@ -284,6 +290,13 @@ py::dict result_stats_dict(const RenderStats& s, bool interrupted) {
   st["out_of_window_fraction"] = all > 0 ? (s.early_total + s.late_total) / all : 0.0;
   st["early_fraction"] = all > 0 ? s.early_total / all : 0.0;
   st["late_fraction"] = all > 0 ? s.late_total / all : 0.0;
+  // The schedule the core resolved from the settings and their defaults.
+  st["alpha"] = s.schedule.alpha;
+  st["surface_alpha"] = s.schedule.surface_alpha;
+  st["initial_beam_radius_m"] = s.schedule.initial_beam_radius;
+  st["initial_time_half_width_m"] = s.schedule.initial_time_half_width;
+  st["initial_surface_radius_m"] = s.schedule.initial_surface_radius;
+  st["initial_surface_time_half_width_m"] = s.schedule.initial_surface_time_half_width;
   return st;
 }
 

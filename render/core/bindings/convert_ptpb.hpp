@@ -19,8 +19,10 @@ ptpb::RenderSettings parse_settings(const py::dict& d);
 
 // The counters and timings a result's "stats" dict and a checkpoint state carry.
 py::dict stats_dict(const ptpb::RenderStats& s);
-// A result's "stats": stats_dict, whether the run was cancelled or interrupted (Ctrl-C), and the
-// fractions of the energy before and after the frame window.
+// A result's "stats": stats_dict, whether the run was cancelled or interrupted (Ctrl-C), the
+// fractions of the energy before and after the frame window, and the resolved schedule (alpha,
+// surface_alpha, initial_beam_radius_m, initial_time_half_width_m, initial_surface_radius_m,
+// initial_surface_time_half_width_m).
 py::dict result_stats_dict(const ptpb::RenderStats& s, bool interrupted);
 
 // The checkpoint dict: the state's sums copied out (steady, early, late float64; frames and their

@@ -53,6 +53,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   resume.reset();
   RenderStats& stats = state.stats;
   stats.cancelled = false;
+  stats.schedule = resolve_schedule(film.mode, settings);
   const double time_before = stats.time_total_s;  // render time of the runs this one continues
   auto elapsed = [&] { return time_before + seconds_since(t_start); };
 
@@ -97,10 +98,10 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   for (long it = stats.iterations_done; it < max_iterations && !cancel.load(); ++it) {
     if (settings.time_budget_s > 0 && it > 0 && elapsed() >= settings.time_budget_s) break;
     double R, T;
-    iteration_bandwidths(film.mode, settings, it, R, T);
+    iteration_bandwidths(film.mode, stats.schedule, it, R, T);
     if (film.mode == FrameMode::Gate) T = std::max(T, 0.0);
     double r_s, T_s;
-    surface_bandwidths(film.mode, settings, it, r_s, T_s);
+    surface_bandwidths(film.mode, stats.schedule, it, r_s, T_s);
 
     // 1. Light paths, in fixed chunks of path indices; beams and photons kept in path order (§9).
     auto t0 = Clock::now();

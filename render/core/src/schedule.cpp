@@ -7,8 +7,28 @@
 
 namespace ptpb {
 
-void iteration_bandwidths(FrameMode mode, const RenderSettings& s, long iteration, double& radius,
-                          double& time_half_width) {
+double beam_schedule_alpha(FrameMode /*mode*/, const RenderSettings& s) {
+  if (s.alpha) return *s.alpha;
+  return 4.0 / 5.0;
+}
+
+double surface_schedule_alpha(FrameMode mode, const RenderSettings& s) {
+  if (s.surface_alpha) return *s.surface_alpha;
+  return mode == FrameMode::Gate ? 4.0 / 7.0 : 2.0 / 3.0;
+}
+
+Schedule resolve_schedule(FrameMode mode, const RenderSettings& s) {
+  Schedule r;
+  r.alpha = beam_schedule_alpha(mode, s);
+  r.initial_beam_radius = s.initial_beam_radius;
+  r.initial_time_half_width = s.initial_time_half_width.value_or(s.initial_beam_radius);
+  r.surface_alpha = surface_schedule_alpha(mode, s);
+  r.initial_surface_radius = s.initial_surface_radius.value_or(s.initial_beam_radius);
+  r.initial_surface_time_half_width = s.initial_surface_time_half_width.value_or(r.initial_time_half_width);
+  return r;
+}
+
+void iteration_bandwidths(FrameMode mode, const Schedule& s, long iteration, double& radius, double& time_half_width) {
   const double gamma = schedule_gamma(iteration, s.alpha);
   if (mode == FrameMode::Gate) {
     radius = s.initial_beam_radius * std::sqrt(gamma);
@@ -19,15 +39,9 @@ void iteration_bandwidths(FrameMode mode, const RenderSettings& s, long iteratio
   }
 }
 
-double surface_schedule_alpha(FrameMode mode, const RenderSettings& s) {
-  if (s.surface_alpha) return *s.surface_alpha;
-  return mode == FrameMode::Gate ? 4.0 / 7.0 : 2.0 / 3.0;
-}
-
-void surface_bandwidths(FrameMode mode, const RenderSettings& s, long iteration, double& radius,
-                        double& time_half_width) {
-  const double gamma = schedule_gamma(iteration, surface_schedule_alpha(mode, s));
-  const double t0 = s.initial_surface_time_half_width.value_or(s.initial_time_half_width);
+void surface_bandwidths(FrameMode mode, const Schedule& s, long iteration, double& radius, double& time_half_width) {
+  const double gamma = schedule_gamma(iteration, s.surface_alpha);
+  const double t0 = s.initial_surface_time_half_width;
   if (mode == FrameMode::Gate) {
     const double shrink = std::cbrt(gamma);
     radius = s.initial_surface_radius * shrink;

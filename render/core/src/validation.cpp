@@ -38,9 +38,10 @@ void validate_settings(const RenderSettings& s) {
   require(std::isfinite(s.time_budget_s) && s.time_budget_s >= 0, "time_budget_s must be >= 0");
   require(s.light_paths_per_iteration > 0 && s.light_paths_per_iteration < (1ull << 32),
           "light_paths_per_iteration must lie in [1, 2^32)");
-  require(s.alpha > 0 && s.alpha <= 1, "alpha must lie in (0, 1]");
+  require(!s.alpha || (*s.alpha > 0 && *s.alpha <= 1), "alpha must lie in (0, 1]");
   require(std::isfinite(s.initial_beam_radius) && s.initial_beam_radius > 0, "initial_beam_radius must be > 0 (m)");
-  require(std::isfinite(s.initial_time_half_width) && s.initial_time_half_width > 0,
+  require(!s.initial_time_half_width ||
+              (std::isfinite(*s.initial_time_half_width) && *s.initial_time_half_width > 0),
           "initial_time_half_width must be > 0 (m of OPL)");
   require(s.parallel_guard_sin2 >= 0 && s.parallel_guard_sin2 < 1, "parallel_guard_sin2 must lie in [0, 1)");
   require(s.max_depth == -1 || s.max_depth >= 1, "max_depth must be -1 or >= 1");
@@ -50,7 +51,7 @@ void validate_settings(const RenderSettings& s) {
   require(s.snapshot_every >= 0, "snapshot_every must be >= 0");
   require(s.transmittance_cutoff > 0 && s.transmittance_cutoff < 1, "transmittance_cutoff must lie in (0, 1)");
   require(s.dice_length >= 0, "dice_length must be >= 0");
-  require(std::isfinite(s.initial_surface_radius) && s.initial_surface_radius > 0,
+  require(!s.initial_surface_radius || (std::isfinite(*s.initial_surface_radius) && *s.initial_surface_radius > 0),
           "initial_surface_radius must be > 0 (m)");
   require(!s.initial_surface_time_half_width ||
               (std::isfinite(*s.initial_surface_time_half_width) && *s.initial_surface_time_half_width > 0),
@@ -97,8 +98,9 @@ void validate_resume(const RenderState& st, const Scene& scene, const RenderSett
           "its sums hold NaN or infinite values (a damaged checkpoint)");
   if (done == 0) return;
   double R, T, r_s, T_s;
-  iteration_bandwidths(scene.film.mode, s, done - 1, R, T);
-  surface_bandwidths(scene.film.mode, s, done - 1, r_s, T_s);
+  const Schedule schedule = resolve_schedule(scene.film.mode, s);
+  iteration_bandwidths(scene.film.mode, schedule, done - 1, R, T);
+  surface_bandwidths(scene.film.mode, schedule, done - 1, r_s, T_s);
   require(R == st.stats.final_radius && T == st.stats.final_time_half_width && r_s == st.stats.final_surface_radius &&
               T_s == st.stats.final_surface_time_half_width,
           "its bandwidths after " + std::to_string(done) +

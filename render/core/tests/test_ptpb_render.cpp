@@ -164,13 +164,42 @@ TEST_CASE("the structure is built with the scheduled radius R_i") {
   Scene sc = cube_scene();
   sc.film.mode = FrameMode::Gate;
   s.alpha = 2.0 / 3.0;
+  s.initial_time_half_width = 0.01;
   const RenderResult r = render(sc, s);
   CHECK_CLOSE(r.stats.final_radius, s.initial_beam_radius * std::sqrt(0.493106), 1e-5);
-  CHECK_CLOSE(r.stats.final_time_half_width, s.initial_time_half_width * std::sqrt(0.493106), 1e-5);
+  CHECK_CLOSE(r.stats.final_time_half_width, 0.01 * std::sqrt(0.493106), 1e-5);
   sc.film.mode = FrameMode::Bins;
   s.alpha = 0.8;
   const RenderResult q = render(sc, s);
   CHECK_CLOSE(q.stats.final_radius, s.initial_beam_radius * 0.659878, 1e-5);
+}
+
+TEST_CASE("the core resolves every schedule default and reports it in stats") {
+  RenderSettings s = small_settings();  // R_0 = 3 cm, nothing else of the schedule set
+  s.iterations = 1;
+  s.light_paths_per_iteration = 100;
+  Scene sc = cube_scene();
+  for (FrameMode mode : {FrameMode::Steady, FrameMode::Bins, FrameMode::Gate}) {
+    sc.film.mode = mode;
+    const Schedule resolved = render(sc, s).stats.schedule;
+    CHECK(resolved.alpha == 0.8);
+    CHECK(resolved.surface_alpha == (mode == FrameMode::Gate ? 4.0 / 7.0 : 2.0 / 3.0));
+    CHECK(resolved.initial_beam_radius == 0.03);
+    CHECK(resolved.initial_time_half_width == 0.03);  // T_0, r_0 and the surfaces' T_0 fall back to R_0
+    CHECK(resolved.initial_surface_radius == 0.03);
+    CHECK(resolved.initial_surface_time_half_width == 0.03);
+  }
+  s.alpha = 0.7;
+  s.surface_alpha = 0.6;
+  s.initial_time_half_width = 0.02;
+  s.initial_surface_radius = 0.05;
+  Schedule resolved = render(sc, s).stats.schedule;
+  CHECK(resolved.alpha == 0.7 && resolved.surface_alpha == 0.6);
+  CHECK(resolved.initial_time_half_width == 0.02 && resolved.initial_surface_radius == 0.05);
+  CHECK(resolved.initial_surface_time_half_width == 0.02);  // the beams' T_0
+  s.initial_surface_time_half_width = 0.04;
+  resolved = render(sc, s).stats.schedule;
+  CHECK(resolved.initial_surface_time_half_width == 0.04);
 }
 
 TEST_CASE("bad input throws with the parameter's name") {

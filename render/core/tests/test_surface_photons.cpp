@@ -188,8 +188,8 @@ TEST_CASE("the surface schedule of §6 reaches the photon grid in every mode") {
   sc.film.bin_width_opl = 0.01;
   sc.film.mode = FrameMode::Gate;  // alpha = 4/7: gamma_10 = 0.397352, r and T shrink by its cube root
   RenderResult r = render(sc, s);
-  CHECK_CLOSE(r.stats.final_surface_radius, s.initial_surface_radius * std::cbrt(0.397352), 1e-5);
-  CHECK_CLOSE(r.stats.final_surface_time_half_width, s.initial_time_half_width * std::cbrt(0.397352), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_radius, *s.initial_surface_radius * std::cbrt(0.397352), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_time_half_width, *s.initial_time_half_width * std::cbrt(0.397352), 1e-5);
   CHECK(r.stats.surface_photons > 0);
   CHECK(r.stats.surface_pairs > 0);
   s.initial_surface_time_half_width = 0.02;
@@ -197,12 +197,12 @@ TEST_CASE("the surface schedule of §6 reaches the photon grid in every mode") {
   CHECK_CLOSE(r.stats.final_surface_time_half_width, 0.02 * std::cbrt(0.397352), 1e-5);
   sc.film.mode = FrameMode::Bins;  // alpha = 2/3: gamma_10 = 0.493106, r shrinks by its square root
   r = render(sc, s);
-  CHECK_CLOSE(r.stats.final_surface_radius, s.initial_surface_radius * std::sqrt(0.493106), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_radius, *s.initial_surface_radius * std::sqrt(0.493106), 1e-5);
   CHECK_CLOSE(r.stats.final_surface_time_half_width, 0.02, 1e-12);
   sc.film.mode = FrameMode::Steady;
   s.surface_alpha = 0.8;  // explicit: gamma_10 = 0.659878
   r = render(sc, s);
-  CHECK_CLOSE(r.stats.final_surface_radius, s.initial_surface_radius * std::sqrt(0.659878), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_radius, *s.initial_surface_radius * std::sqrt(0.659878), 1e-5);
 }
 
 TEST_CASE("a sunlit diffuse plane renders E cos(theta) rho / pi; max_depth 1 leaves it black") {

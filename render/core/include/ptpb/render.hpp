@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "ptpb/scene.hpp"
+#include "ptpb/schedule.hpp"
 #include "ptpb/settings.hpp"
 
 namespace ptpb {
@@ -37,6 +38,7 @@ struct RenderStats {
   double time_surface_build_s = 0;
   double final_surface_radius = 0, final_surface_time_half_width = 0;
   double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check
+  Schedule schedule;  // the bandwidth schedule this run resolved and used (§6)
 };
 
 // The accumulated state of a progressive render after stats.iterations_done iterations: the sums

@@ -14,12 +14,14 @@ struct RenderSettings {
   int iterations = 16;                 // upper bound on iterations
   double time_budget_s = 0.0;          // wall-clock budget; > 0 stops after the iteration in flight
   std::uint64_t light_paths_per_iteration = 10000;  // M
-  double alpha = 0.8;                  // kernel-volume schedule parameter (§6)
+  // The bandwidth schedule (§6). Unset values take the defaults resolve_schedule (schedule.hpp)
+  // gives them, which a render reports in RenderStats::schedule.
+  std::optional<double> alpha;         // kernel-volume schedule parameter; unset: 4/5
   double initial_beam_radius = 0.01;   // R_0, m
-  double initial_time_half_width = 0.01;  // T_0, m of OPL (gate mode)
+  std::optional<double> initial_time_half_width;  // T_0, m of OPL (gate mode); unset: R_0
   // Surface photons (§7) run their own schedule (§6): disk radius r_0 and, in gate mode, T_0.
-  double initial_surface_radius = 0.01;  // r_0, m
-  std::optional<double> initial_surface_time_half_width;  // m of OPL; unset: initial_time_half_width
+  std::optional<double> initial_surface_radius;  // r_0, m; unset: R_0
+  std::optional<double> initial_surface_time_half_width;  // m of OPL; unset: the beams' T_0
   std::optional<double> surface_alpha;   // unset: 2/3 in bins/steady, 4/7 in gate (alpha* for d = 2, 3)
   double surface_normal_cos = 0.9;       // photons whose normal is further than acos(this) from x's are rejected
   SpatialKernel spatial_kernel = SpatialKernel::Epanechnikov;
