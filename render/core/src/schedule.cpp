@@ -7,9 +7,9 @@
 
 namespace ptpb {
 
-double beam_schedule_alpha(FrameMode /*mode*/, const RenderSettings& s) {
+double beam_schedule_alpha(FrameMode mode, const RenderSettings& s) {
   if (s.alpha) return *s.alpha;
-  return 4.0 / 5.0;
+  return mode == FrameMode::Gate ? 2.0 / 3.0 : 4.0 / 5.0;
 }
 
 double surface_schedule_alpha(FrameMode mode, const RenderSettings& s) {

@@ -182,7 +182,7 @@ TEST_CASE("the core resolves every schedule default and reports it in stats") {
   for (FrameMode mode : {FrameMode::Steady, FrameMode::Bins, FrameMode::Gate}) {
     sc.film.mode = mode;
     const Schedule resolved = render(sc, s).stats.schedule;
-    CHECK(resolved.alpha == 0.8);
+    CHECK(resolved.alpha == (mode == FrameMode::Gate ? 2.0 / 3.0 : 0.8));
     CHECK(resolved.surface_alpha == (mode == FrameMode::Gate ? 4.0 / 7.0 : 2.0 / 3.0));
     CHECK(resolved.initial_beam_radius == 0.03);
     CHECK(resolved.initial_time_half_width == 0.03);  // T_0, r_0 and the surfaces' T_0 fall back to R_0

@@ -17,7 +17,8 @@ struct Schedule {
   double initial_surface_time_half_width = 0.0;  // m of OPL (gate mode)
 };
 
-// The beams' schedule parameter: alpha, or 4/5 when unset.
+// The beams' schedule parameter: alpha, or alpha* = 4/(d + 4) for the 1-D kernel across a beam
+// (d = 1) in bins/steady and that kernel x time (d = 2) in gate mode: 4/5 and 2/3 (§6).
 double beam_schedule_alpha(FrameMode mode, const RenderSettings& s);
 
 // The surface photons' schedule parameter: surface_alpha, or alpha* = 4/(d + 4) for the disk

@@ -16,7 +16,7 @@ struct RenderSettings {
   std::uint64_t light_paths_per_iteration = 10000;  // M
   // The bandwidth schedule (§6). Unset values take the defaults resolve_schedule (schedule.hpp)
   // gives them, which a render reports in RenderStats::schedule.
-  std::optional<double> alpha;         // kernel-volume schedule parameter; unset: 4/5
+  std::optional<double> alpha;         // kernel-volume schedule parameter; unset: 4/5, 2/3 in gate
   double initial_beam_radius = 0.01;   // R_0, m
   std::optional<double> initial_time_half_width;  // T_0, m of OPL (gate mode); unset: R_0
   // Surface photons (§7) run their own schedule (§6): disk radius r_0 and, in gate mode, T_0.
