@@ -72,7 +72,12 @@ def ptpb_render(
 
     Returns ``steady`` (H, W, 3), ``frames`` (F, H, W, 3), ``early`` and ``late`` (H, W, 3), all
     float32; ``snapshots`` (a list of (iteration, (H, W, 3) array)); ``snapshot_seconds``; and
-    ``stats`` (counters, timings, final bandwidths, cancelled/interrupted, window fractions).
+    ``stats`` (counters, timings, final bandwidths, cancelled/interrupted, window fractions), which
+    also reports the schedule the core resolved from the settings and its defaults (ptpb.md §6):
+    ``alpha`` (unset: 2/3 in gate, 4/5 in bins/steady), ``surface_alpha`` (unset: 4/7 in gate, 2/3
+    otherwise), ``initial_beam_radius_m``, ``initial_time_half_width_m`` (unset: R_0),
+    ``initial_surface_radius_m`` (unset: R_0) and ``initial_surface_time_half_width_m`` (unset: the
+    beams' T_0). A missing or None settings key is unset.
 
     The GIL is released while rendering; ``progress(info) -> bool|None`` is called about twice a
     second and after each iteration; returning False or Ctrl-C stops when the iteration under way is
