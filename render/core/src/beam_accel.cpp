@@ -1,4 +1,4 @@
-// The beam structures' factory (ptpb.md §8): one structure per source file, beam_grid.cpp and
+// The beam structures' factory (DESIGN.md §8): one structure per source file, beam_grid.cpp and
 // beam_bvh.cpp, behind the BeamAccel interface (as pbrt-v4's CreateAccelerator).
 #include "ptpb/beam_accel.hpp"
 

@@ -1,11 +1,11 @@
-// The beam structures' shared parts (ptpb.md §8): what the grid (beam_grid.cpp) and the BVH
+// The beam structures' shared parts (DESIGN.md §8): what the grid (beam_grid.cpp) and the BVH
 // (beam_bvh.cpp) both use, and their factories, which make_beam_accel (beam_accel.cpp) calls.
 // Private to the core's sources.
 //
 // Uniform grid and 4-wide BVH (built by Embree's BVH builder, traversed here) over diced,
 // R-inflated beam pieces.
 //
-// Both run the gather's exact closest-approach test (ptpb.md §4) themselves, in a division-free
+// Both run the gather's exact closest-approach test (DESIGN.md §4) themselves, in a division-free
 // form that is looser than the gather's, and report each beam once: from the pieces that own the
 // beam parameter s_b of the closest approach (BVH; repeats dropped after the sort), or from the
 // grid cell that owns the query parameter t_b (grid). The gather's own test then decides exactly as

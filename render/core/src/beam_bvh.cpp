@@ -1,4 +1,4 @@
-// 4-wide BVH over diced, R-inflated beam pieces (ptpb.md §8), built by Embree's BVH builder and
+// 4-wide BVH over diced, R-inflated beam pieces (DESIGN.md §8), built by Embree's BVH builder and
 // traversed here.
 //
 // Why not Embree user geometry: its per-primitive callback costs more than the traversal itself;
@@ -149,7 +149,7 @@ class BeamBvh final : public BeamAccel {
     const double scale = scene_scale(bounds);
     const double inflate = radius + kBoxMargin * scale;
     // Automatic piece length: a few R (tight boxes), but never so short that a beam has more than
-    // about two pieces on average. Long beams diced at 4R (the cube of ptpb.md §10 test 4: ~30
+    // about two pieces on average. Long beams diced at 4R (the cube of DESIGN.md §10 test 4: ~30
     // pieces a beam at R = 1 cm) made the build cost 85 % of a render and deepened every query;
     // at half the mean length the same render ran 3.5x faster (build 2.13 -> 0.17 s, camera pass
     // 1.07 -> 0.60 s). The penitente benchmark's beams are short: there 6R rather than 4R costs

@@ -1,4 +1,4 @@
-// Uniform grid of diced, R-inflated beam pieces (SmallUPBP style), tested in double (ptpb.md §8).
+// Uniform grid of diced, R-inflated beam pieces (SmallUPBP style), tested in double (DESIGN.md §8).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -57,7 +57,7 @@ bool pair_candidate(const PairQuery& q, const Vec3d& xb, const Vec3d& wb, Approa
   return n.t_num >= q.t_lo * n.sin2 && n.t_num <= q.t_hi * n.sin2 && n.w_cross * n.w_cross < q.radius2 * n.sin2;
 }
 
-// Sorts out[from, end) ascending: the canonical summation order of ptpb.md §9, on which the gather
+// Sorts out[from, end) ascending: the canonical summation order of DESIGN.md §9, on which the gather
 // relies, and sequential beam reads there. An LSD radix sort over the bits the beam indices use
 // The beam's line in double precision, as the exact test reads it.
 struct BeamLine {

@@ -1,4 +1,4 @@
-// Photon beams in memory order (ptpb.md §9): a Morton sort of their midpoints.
+// Photon beams in memory order (DESIGN.md §9): a Morton sort of their midpoints.
 #include <algorithm>
 #include <cstdint>
 #include <limits>

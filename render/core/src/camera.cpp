@@ -1,4 +1,4 @@
-// The camera pass (ptpb.md §4, §7): the pinhole frame and one pixel's camera path, which gathers
+// The camera pass (DESIGN.md §4, §7): the pinhole frame and one pixel's camera path, which gathers
 // beams along its medium segments, follows specular surfaces and ends on diffuse ones.
 #include "ptpb/camera.hpp"
 

@@ -90,7 +90,7 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
   if (scene.shapes.empty()) {
     lo = hi = Vec3d{0, 0, 0};
   }
-  // Mitsuba's bounding sphere of the shapes' bounding box (ptpb.md §1).
+  // Mitsuba's bounding sphere of the shapes' bounding box (DESIGN.md §1).
   sphere_center_ = (lo + hi) * 0.5;
   sphere_radius_ = std::max(length(hi - sphere_center_), 1e-4);
   ray_epsilon_ = 1e-6 * std::max(1.0, std::max(max_component(Vec3d{std::fabs(lo.x), std::fabs(lo.y), std::fabs(lo.z)}),

@@ -1,4 +1,4 @@
-// The film (ptpb.md §5, §9): sums, tile buffers and the averages a render returns.
+// The film (DESIGN.md §5, §9): sums, tile buffers and the averages a render returns.
 #include "ptpb/film.hpp"
 
 #include <utility>

@@ -1,4 +1,4 @@
-// The gather (ptpb.md §4, §5, §7): beam estimates along a camera segment, surface photon estimates
+// The gather (DESIGN.md §4, §5, §7): beam estimates along a camera segment, surface photon estimates
 // at a diffuse camera hit, each splatted into the pixel's tile.
 #include "ptpb/gather.hpp"
 

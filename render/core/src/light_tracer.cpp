@@ -1,4 +1,4 @@
-// Light tracing (ptpb.md §3, §7): emission, free flights, boundaries, roulette, beam records and
+// Light tracing (DESIGN.md §3, §7): emission, free flights, boundaries, roulette, beam records and
 // surface photons.
 #include "ptpb/light_tracer.hpp"
 
@@ -134,7 +134,7 @@ void trace_light_paths(const CompiledScene& cs, const RenderSettings& settings, 
   constexpr std::size_t kPathChunk = 256;
   constexpr int kChunksPerThread = 16;  // light-path chunks per thread in one group
   // Traced a group of chunks at a time and appended in chunk order, so that at most one group's
-  // records exist twice (ptpb.md §9 "Memory").
+  // records exist twice (DESIGN.md §9 "Memory").
   const std::size_t path_chunks = (M + kPathChunk - 1) / kPathChunk;
   const std::size_t group = std::size_t(kChunksPerThread) * resolve_thread_count(settings.threads);
   beams.clear();

@@ -1,4 +1,4 @@
-// The BVH's leaf test (beam_bvh.cpp, ptpb.md §8): the pieces' lines in float, and the closest-approach
+// The BVH's leaf test (beam_bvh.cpp, DESIGN.md §8): the pieces' lines in float, and the closest-approach
 // test on them without divisions, one piece or four at a time (SSE). Private to the core's sources.
 #pragma once
 #if defined(__SSE2__)

@@ -1,4 +1,4 @@
-// The progressive PTPB loop (ptpb.md §4–§7, §9): per iteration, trace M light paths into beams
+// The progressive PTPB loop (DESIGN.md §4–§7, §9): per iteration, trace M light paths into beams
 // and surface photons, build the beam structure with R_i and the photon grid with r_i, trace one
 // jittered camera path per pixel, evaluate every ray–beam pair and every photon at a diffuse
 // camera hit once, and splat it into the steady image and every frame its kernel covers. The
@@ -132,7 +132,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     pass.surface_radius = photon_grid.radius();
     pass.surface_time_half_width = T_s;
     // Tiles add straight into the sums, so a pass is never left half done: a cancel that arrives
-    // during it takes effect after it (ptpb.md §9; the iteration is kept, not dropped).
+    // during it takes effect after it (DESIGN.md §9; the iteration is kept, not dropped).
     parallel_for_chunks(std::size_t(tiles_x) * tiles_y, 1, settings.threads, [&](std::size_t t_begin, std::size_t t_end) {
       std::vector<std::uint32_t> cand;
       std::unique_ptr<TileFilm> tile = tile_films.take();

@@ -1,4 +1,4 @@
-// The progressive bandwidth schedule (ptpb.md §6).
+// The progressive bandwidth schedule (DESIGN.md §6).
 #include "ptpb/schedule.hpp"
 
 #include <cmath>

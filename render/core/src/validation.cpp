@@ -1,4 +1,4 @@
-// Checks before a render (ptpb.md §9): settings, resume states and the memory budget.
+// Checks before a render (DESIGN.md §9): settings, resume states and the memory budget.
 #include "ptpb/validation.hpp"
 
 #include <cmath>

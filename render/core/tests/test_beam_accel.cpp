@@ -1,4 +1,4 @@
-// The beam structures against brute force (ptpb.md §8): every beam that passes the gather's exact
+// The beam structures against brute force (DESIGN.md §8): every beam that passes the gather's exact
 // test of §4 is reported, once, in ascending order, and nothing that fails it by more than the
 // documented slack.
 #include <algorithm>
@@ -170,7 +170,7 @@ TEST_CASE("degenerate beams: identical, zero length, axis-aligned, far from the 
 
 TEST_CASE("automatic dicing: a few R, but about two pieces a beam at most") {
   KeyedRng rng(31, 0, StreamDomain::Test, 6);
-  // Long beams at a small R (the cube of ptpb.md §10 test 4): 6R would cut each into ~13 pieces.
+  // Long beams at a small R (the cube of DESIGN.md §10 test 4): 6R would cut each into ~13 pieces.
   std::vector<Beam> beams = random_beams(rng, 2000, 1.0, 1.6);  // mean length 0.8 m
   auto accel = make_beam_accel(AccelKind::Embree, 32, 0.0);
   accel->build(beams, 0.01, 2);

@@ -29,7 +29,7 @@ Shape box(double h, SurfaceKind kind, int interior) {
   return s;
 }
 
-// ptpb.md §10 test 3: camera at the centre of a 10 m index-matched cube, light at (0, -3, 0).
+// DESIGN.md §10 test 3: camera at the centre of a 10 m index-matched cube, light at (0, -3, 0).
 Scene single_scattering_scene(double ior) {
   Scene sc;
   Medium m;

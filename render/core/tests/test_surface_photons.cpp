@@ -1,4 +1,4 @@
-// Tests of the surface photon estimator (ptpb.md §7): the 2-D disk kernels through the gather's
+// Tests of the surface photon estimator (DESIGN.md §7): the 2-D disk kernels through the gather's
 // weight, the density of a synthetic uniform photon field, the hash grid against brute force,
 // the surface schedule of §6 reaching the grid, and a rendered diffuse plane under the sun.
 #include <algorithm>

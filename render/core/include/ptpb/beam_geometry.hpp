@@ -1,4 +1,4 @@
-// Closest approach between a query ray and a photon beam (ptpb.md §4).
+// Closest approach between a query ray and a photon beam (DESIGN.md §4).
 #pragma once
 #include <cmath>
 

@@ -1,4 +1,4 @@
-// Photon beams (ptpb.md §3): the record stored per medium segment of a light path, and their
+// Photon beams (DESIGN.md §3): the record stored per medium segment of a light path, and their
 // order in memory.
 #pragma once
 #include <cstdint>
@@ -25,7 +25,7 @@ struct Beam {
 
 // Reorders beams along a Morton curve of their midpoints (ties by their previous index): a
 // deterministic function of the beams in light-path order, so results stay independent of the
-// thread count (ptpb.md §9), while beams near in space lie near in memory for the beam structure
+// thread count (DESIGN.md §9), while beams near in space lie near in memory for the beam structure
 // and the gather. Moves the records in place (no second copy of the beams).
 void sort_beams_spatially(std::vector<Beam>& beams, int threads);
 

@@ -1,4 +1,4 @@
-// The camera pass (ptpb.md §4, §7): Mitsuba's pinhole camera, and the camera path of one pixel,
+// The camera pass (DESIGN.md §4, §7): Mitsuba's pinhole camera, and the camera path of one pixel,
 // which gathers beams along its medium segments and surface photons where it ends on a diffuse
 // surface.
 #pragma once

@@ -39,7 +39,7 @@ class CompiledScene {
   bool scattering(int medium) const { return medium != kVacuum && has_scattering_[medium]; }
   bool attenuating(int medium) const { return medium != kVacuum && has_extinction_[medium]; }
 
-  // Starts one light path: picks a light by power and samples its emission (ptpb.md §3).
+  // Starts one light path: picks a light by power and samples its emission (DESIGN.md §3).
   bool sample_emission(KeyedRng& rng, LightSample& out) const;
   double total_light_power() const { return total_power_; }
   double ray_epsilon() const { return ray_epsilon_; }

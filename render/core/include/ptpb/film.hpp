@@ -1,4 +1,4 @@
-// The film (ptpb.md §5, §9): the sums a render accumulates, the tile buffers the threads splat
+// The film (DESIGN.md §5, §9): the sums a render accumulates, the tile buffers the threads splat
 // into, the splat of one estimate into the steady image, early, late and the frames its time
 // covers, and the averages a render returns.
 #pragma once
@@ -31,7 +31,7 @@ void add_snapshot(RenderState& state, long iterations, double seconds);
 // sums become the averages in place, so the state gives up its buffers: no second film at the end.
 RenderResult average_state(RenderState& state);
 
-// One tile's share of one iteration's film, in double (ptpb.md §9 "Memory"): planes of
+// One tile's share of one iteration's film, in double (DESIGN.md §9 "Memory"): planes of
 // tile_size^2 pixels x 3 for steady, early, late and then frame 0 .. F-1. The tile's owner splats
 // into it and then adds it to the shared sums (TileFilm::flush), which leaves it zeroed for the next
 // tile. Only frames [kmin, kmax] can be non-zero.

@@ -1,4 +1,4 @@
-// Free flights in homogeneous media and Russian roulette (ptpb.md §3), shared by light and camera
+// Free flights in homogeneous media and Russian roulette (DESIGN.md §3), shared by light and camera
 // tracing.
 #pragma once
 #include <algorithm>

@@ -1,4 +1,4 @@
-// The gather (ptpb.md §4, §5, §7): the estimates a camera path collects, from photon beams along a
+// The gather (DESIGN.md §4, §5, §7): the estimates a camera path collects, from photon beams along a
 // medium segment and from surface photons at a diffuse hit, and the acceptance test of a ray–beam
 // pair that the beam structures mirror.
 #pragma once

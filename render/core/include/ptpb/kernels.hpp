@@ -1,4 +1,4 @@
-// Normalised density-estimation kernels and the progressive bandwidth schedule (ptpb.md §4–§7).
+// Normalised density-estimation kernels and the progressive bandwidth schedule (DESIGN.md §4–§7).
 #pragma once
 #include <cmath>
 #include <stdexcept>

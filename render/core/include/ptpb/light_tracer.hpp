@@ -1,4 +1,4 @@
-// The light tracer (ptpb.md §3, §7): light paths from emission to their last bounce, leaving photon
+// The light tracer (DESIGN.md §3, §7): light paths from emission to their last bounce, leaving photon
 // beams in media and surface photons on diffuse surfaces.
 #pragma once
 #include <cstdint>

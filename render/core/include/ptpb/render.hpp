@@ -50,7 +50,7 @@ struct RenderState {
   int width = 0, height = 0, frame_count = 0;
   std::uint64_t seed = 0;
   std::vector<double> steady, early, late;  // H x W x 3
-  // F x H x W x 3 in float32 (ptpb.md §9: float sums are exact enough up to ~10^4 iterations).
+  // F x H x W x 3 in float32 (DESIGN.md §9: float sums are exact enough up to ~10^4 iterations).
   // From iteration settings.compensated_sums_from on, frames_carry (same size) holds each sum's rounding
   // remainder: the sum is then frames + frames_carry, about 48 significant bits. Empty before.
   std::vector<float> frames;

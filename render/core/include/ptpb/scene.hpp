@@ -45,7 +45,7 @@ struct PointLight {
   int medium = kVacuum;
 };
 
-// Plane wave from direction `to_sun`; the time origin is the plane Pi_0 of ptpb.md §1.
+// Plane wave from direction `to_sun`; the time origin is the plane Pi_0 of DESIGN.md §1.
 struct DirectionalLight {
   Vec3d to_sun{0, 0, 1};
   Vec3d irradiance{0, 0, 0};  // W/m^2 on a plane perpendicular to to_sun

@@ -1,4 +1,4 @@
-// The progressive bandwidth schedule (ptpb.md §6): the kernel radii and temporal half-widths of
+// The progressive bandwidth schedule (DESIGN.md §6): the kernel radii and temporal half-widths of
 // iteration i, for beams and for surface photons.
 #pragma once
 #include "ptpb/scene.hpp"

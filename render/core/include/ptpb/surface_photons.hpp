@@ -1,4 +1,4 @@
-// Surface photons and their density estimate on diffuse surfaces (ptpb.md §7): the record a
+// Surface photons and their density estimate on diffuse surfaces (DESIGN.md §7): the record a
 // light path leaves at each diffuse hit, a uniform hash grid rebuilt every iteration with the
 // iteration's radius r_i, and the per-photon acceptance and kernel weight of the gather.
 #pragma once

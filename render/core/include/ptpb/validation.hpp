@@ -1,4 +1,4 @@
-// Checks before a render (ptpb.md §9): settings and resume states that would fail, and films whose
+// Checks before a render (DESIGN.md §9): settings and resume states that would fail, and films whose
 // image buffers would not fit the memory budget. Each refusal is a std::invalid_argument that names
 // the parameter and how to fix it.
 #pragma once
