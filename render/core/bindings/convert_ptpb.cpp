@@ -85,12 +85,13 @@ std::vector<py::dict> dict_list(const py::dict& d, const char* key) {
 // An (N, 3) array of a shape's mesh; a missing key, another shape or a non-numeric value names the key.
 template <typename T>
 py::array_t<T, py::array::c_style | py::array::forcecast> mesh_array(const py::dict& s, const char* key,
-                                                                      const std::string& where) {
+                                                                     const std::string& where) {
   if (!s.contains(key)) throw std::invalid_argument(where + "." + key + " is required");
   const auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(s[key]);  // null if not numeric
   if (!a) throw std::invalid_argument(where + "." + key + " must be an array of numbers");
   if (a.ndim() != 2 || a.shape(1) != 3)
-    throw std::invalid_argument(where + "." + key + (a.ndim() == 1 && a.shape(0) == 0 ? " is empty" : " must be (N, 3)"));
+    throw std::invalid_argument(where + "." + key +
+                                (a.ndim() == 1 && a.shape(0) == 0 ? " is empty" : " must be (N, 3)"));
   return a;
 }
 
@@ -124,7 +125,8 @@ void for_each_stat(Stats& s, Visit&& visit) {
 RenderStats parse_stats(const py::dict& d) {
   const std::string w = "resume.stats";
   RenderStats s;
-  for_each_stat(s, [&](const char* key, auto& value) { value = require_key<std::decay_t<decltype(value)>>(d, key, w); });
+  for_each_stat(s,
+                [&](const char* key, auto& value) { value = require_key<std::decay_t<decltype(value)>>(d, key, w); });
   return s;
 }
 
@@ -181,9 +183,10 @@ Scene parse_scene(const py::dict& d) {
                                     std::to_string(index) + ", outside [0, 2^32 - 1)");
       sh.faces[std::size_t(k)] = static_cast<std::uint32_t>(index);
     }
-    sh.kind = choose<SurfaceKind>(get<std::string>(s, "kind", "null", w),
-                                  {{"null", SurfaceKind::Null}, {"dielectric", SurfaceKind::Dielectric},
-                                   {"diffuse", SurfaceKind::Diffuse}}, w + ".kind");
+    sh.kind = choose<SurfaceKind>(
+        get<std::string>(s, "kind", "null", w),
+        {{"null", SurfaceKind::Null}, {"dielectric", SurfaceKind::Dielectric}, {"diffuse", SurfaceKind::Diffuse}},
+        w + ".kind");
     sh.interior = get<int>(s, "interior", kVacuum, w);
     sh.exterior = get<int>(s, "exterior", kVacuum, w);
     sh.albedo = vec3(s, "albedo", {0, 0, 0}, w);
@@ -193,8 +196,8 @@ Scene parse_scene(const py::dict& d) {
   i = 0;
   for (const py::dict& l : dict_list(d, "point_lights")) {
     const std::string w = "point_lights[" + std::to_string(i++) + "]";
-    sc.point_lights.push_back({vec3(l, "position", {0, 0, 0}, w), vec3(l, "intensity", {0, 0, 0}, w),
-                               get<int>(l, "medium", kVacuum, w)});
+    sc.point_lights.push_back(
+        {vec3(l, "position", {0, 0, 0}, w), vec3(l, "intensity", {0, 0, 0}, w), get<int>(l, "medium", kVacuum, w)});
   }
   i = 0;
   for (const py::dict& l : dict_list(d, "directional_lights")) {
@@ -220,9 +223,9 @@ Scene parse_scene(const py::dict& d) {
   sc.camera.height = require_key<int>(cam, "height", "camera");
   sc.camera.medium = get<int>(cam, "medium", kVacuum, "camera");
   const py::dict film = require_key<py::dict>(d, "film", "scene");
-  sc.film.mode = choose<FrameMode>(require_key<std::string>(film, "frame_mode", "film"),
-                                   {{"steady", FrameMode::Steady}, {"bins", FrameMode::Bins}, {"gate", FrameMode::Gate}},
-                                   "film.frame_mode");
+  sc.film.mode = choose<FrameMode>(
+      require_key<std::string>(film, "frame_mode", "film"),
+      {{"steady", FrameMode::Steady}, {"bins", FrameMode::Bins}, {"gate", FrameMode::Gate}}, "film.frame_mode");
   sc.film.temporal_bins = get<int>(film, "temporal_bins", 0, "film");
   sc.film.start_opl = get<double>(film, "start_opl", 0.0, "film");
   sc.film.bin_width_opl = get<double>(film, "bin_width_opl", 0.003, "film");
@@ -246,10 +249,11 @@ RenderSettings parse_settings(const py::dict& d) {
   s.spatial_kernel = choose<SpatialKernel>(get<std::string>(d, "spatial_kernel", "epanechnikov", w),
                                            {{"box", SpatialKernel::Box}, {"epanechnikov", SpatialKernel::Epanechnikov}},
                                            "spatial_kernel");
-  s.temporal_kernel = choose<TemporalKernel>(
-      get<std::string>(d, "temporal_kernel", "epanechnikov", w),
-      {{"box", TemporalKernel::Box}, {"epanechnikov", TemporalKernel::Epanechnikov}, {"quintic", TemporalKernel::Quintic}},
-      "temporal_kernel");
+  s.temporal_kernel = choose<TemporalKernel>(get<std::string>(d, "temporal_kernel", "epanechnikov", w),
+                                             {{"box", TemporalKernel::Box},
+                                              {"epanechnikov", TemporalKernel::Epanechnikov},
+                                              {"quintic", TemporalKernel::Quintic}},
+                                             "temporal_kernel");
   s.photon_beam_kind = choose<BeamKind>(get<std::string>(d, "photon_beam_kind", "long", w),
                                         {{"long", BeamKind::Long}, {"short", BeamKind::Short}}, "photon_beam_kind");
   s.query_beam_kind = choose<BeamKind>(get<std::string>(d, "query_beam_kind", "long", w),
@@ -331,7 +335,8 @@ RenderState parse_state(const py::dict& d) {
   st.height = require_key<int>(d, "height", w);
   st.frame_count = require_key<int>(d, "frame_count", w);
   st.seed = require_key<std::uint64_t>(d, "seed", w);
-  if (st.width < 1 || st.height < 1 || st.frame_count < 0) throw std::invalid_argument("resume: film size out of range");
+  if (st.width < 1 || st.height < 1 || st.frame_count < 0)
+    throw std::invalid_argument("resume: film size out of range");
   const py::ssize_t H = st.height, W = st.width, F = st.frame_count;
   st.steady = state_array<double>(d, "steady", {H, W, 3});
   st.early = state_array<double>(d, "early", {H, W, 3});

@@ -29,8 +29,8 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
                    const py::object& resume, const py::object& checkpoint) {
   const Scene scene = parse_scene(scene_dict);
   const RenderSettings settings = parse_settings(settings_dict);
-  const bool checkpointing = !checkpoint.is_none() &&
-                             (settings.checkpoint_every_iterations > 0 || settings.checkpoint_every_s > 0);
+  const bool checkpointing =
+      !checkpoint.is_none() && (settings.checkpoint_every_iterations > 0 || settings.checkpoint_every_s > 0);
   // Before the resume state is copied in: a film over budget must not allocate anything.
   check_memory_budget(scene, settings, !resume.is_none() || checkpointing);
   std::optional<RenderState> initial;
@@ -41,8 +41,10 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
   bool interrupted = false;
   std::unique_ptr<py::error_already_set> callback_error;
   auto keep_error = [&](py::error_already_set& e) {
-    if (e.matches(PyExc_KeyboardInterrupt)) interrupted = true;
-    else if (!callback_error) callback_error = std::make_unique<py::error_already_set>(std::move(e));
+    if (e.matches(PyExc_KeyboardInterrupt))
+      interrupted = true;
+    else if (!callback_error)
+      callback_error = std::make_unique<py::error_already_set>(std::move(e));
   };
   ProgressCallback cb = [&](const Progress& p) {
     py::gil_scoped_acquire gil;

@@ -36,7 +36,10 @@ inline constexpr double kBoxMargin = 4e-6;
 struct Box {
   Vec3d lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
   void expand(const Vec3d& p) {
-    for (int a = 0; a < 3; ++a) { lo[a] = std::min(lo[a], p[a]); hi[a] = std::max(hi[a], p[a]); }
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], p[a]);
+      hi[a] = std::max(hi[a], p[a]);
+    }
   }
 };
 
@@ -83,7 +86,6 @@ inline void sort_candidates(std::vector<std::uint32_t>& out, std::size_t from) {
 }
 
 inline constexpr std::size_t kBuildChunk = 2048;
-
 
 // grid_resolution: cells along the longest axis (beam_grid.cpp).
 std::unique_ptr<BeamAccel> make_beam_grid(int grid_resolution);

@@ -74,8 +74,12 @@ void set_node_children(void* node_ptr, void** children, unsigned int count, void
 void set_node_bounds(void* node_ptr, const RTCBounds** bounds, unsigned int count, void* /*user*/) {
   auto* node = static_cast<Node4*>(node_ptr);
   for (unsigned i = 0; i < count; ++i) {
-    node->box[0][i] = bounds[i]->lower_x; node->box[1][i] = bounds[i]->lower_y; node->box[2][i] = bounds[i]->lower_z;
-    node->box[3][i] = bounds[i]->upper_x; node->box[4][i] = bounds[i]->upper_y; node->box[5][i] = bounds[i]->upper_z;
+    node->box[0][i] = bounds[i]->lower_x;
+    node->box[1][i] = bounds[i]->lower_y;
+    node->box[2][i] = bounds[i]->lower_z;
+    node->box[3][i] = bounds[i]->upper_x;
+    node->box[4][i] = bounds[i]->upper_y;
+    node->box[5][i] = bounds[i]->upper_z;
   }
 }
 
@@ -93,9 +97,13 @@ RTCBuildPrimitive piece_box(const Beam& b, std::uint32_t beam, int k, int n, dou
   const auto lo = [&](int a) { return std::nextafter(static_cast<float>(std::min(p0[a], p1[a]) - inflate), -1e30f); };
   const auto hi = [&](int a) { return std::nextafter(static_cast<float>(std::max(p0[a], p1[a]) + inflate), 1e30f); };
   RTCBuildPrimitive prim;
-  prim.lower_x = lo(0); prim.lower_y = lo(1); prim.lower_z = lo(2);
-  prim.upper_x = hi(0); prim.upper_y = hi(1); prim.upper_z = hi(2);
-  prim.geomID = beam;                                           // the beam ...
+  prim.lower_x = lo(0);
+  prim.lower_y = lo(1);
+  prim.lower_z = lo(2);
+  prim.upper_x = hi(0);
+  prim.upper_y = hi(1);
+  prim.upper_z = hi(2);
+  prim.geomID = beam;                                                         // the beam ...
   prim.primID = static_cast<unsigned>(k) | (static_cast<unsigned>(n) << 16);  // ... and which of its pieces
   return prim;
 }
@@ -119,8 +127,8 @@ void* create_leaf(RTCThreadLocalAllocator alloc, const RTCBuildPrimitive* prims,
   if (count == 0 || count > kMaxLeafPieces) return nullptr;  // the build then fails with an error
   const RTCBuildPrimitive* leaf = prims;
   if (prims < src.begin || prims + count > src.end || reinterpret_cast<std::uintptr_t>(prims) & 0xF) {
-    auto* copy = static_cast<RTCBuildPrimitive*>(
-        rtcThreadLocalAlloc(alloc, (count + kLeafPad) * sizeof(RTCBuildPrimitive), 16));
+    auto* copy =
+        static_cast<RTCBuildPrimitive*>(rtcThreadLocalAlloc(alloc, (count + kLeafPad) * sizeof(RTCBuildPrimitive), 16));
     std::copy(prims, prims + count, copy);
     std::fill(copy + count, copy + count + kLeafPad, RTCBuildPrimitive{});
     leaf = copy;
@@ -159,7 +167,8 @@ class BeamBvh final : public BeamAccel {
     if (!(dice > 0)) {
       double total_length = 0.0;
       for (const Beam& b : beams) total_length += b.length;
-      dice = std::max({6.0 * radius, max_component(bounds.hi - bounds.lo) / 32.0, 0.5 * total_length / double(beams.size())});
+      dice = std::max(
+          {6.0 * radius, max_component(bounds.hi - bounds.lo) / 32.0, 0.5 * total_length / double(beams.size())});
     }
     const std::size_t chunks = (beams.size() + kBuildChunk - 1) / kBuildChunk;
     std::vector<std::size_t> chunk_start(chunks + 1, 0);  // pieces per chunk, then their prefix sum
@@ -175,7 +184,7 @@ class BeamBvh final : public BeamAccel {
       std::vector<RTCBuildPrimitive>().swap(prims_);
       prims_.reserve((piece_count_ + kLeafPad) * 11 / 10);
     }
-    prims_.resize(piece_count_ + kLeafPad);  // every piece's slot is written below
+    prims_.resize(piece_count_ + kLeafPad);                                 // every piece's slot is written below
     std::fill(prims_.end() - kLeafPad, prims_.end(), RTCBuildPrimitive{});  // zeroed padding: see float_candidates4
     parallel_for_chunks(chunks, 1, threads, [&](std::size_t c0, std::size_t c1) {
       for (std::size_t c = c0; c < c1; ++c) {
@@ -183,7 +192,8 @@ class BeamBvh final : public BeamAccel {
         const std::size_t b_end = std::min(beams.size(), (c + 1) * kBuildChunk);
         for (std::size_t bi = c * kBuildChunk; bi < b_end; ++bi) {
           const int n = pieces_of(beams[bi]);
-          for (int k = 0; k < n; ++k) prims_[slot++] = piece_box(beams[bi], static_cast<std::uint32_t>(bi), k, n, inflate);
+          for (int k = 0; k < n; ++k)
+            prims_[slot++] = piece_box(beams[bi], static_cast<std::uint32_t>(bi), k, n, inflate);
         }
       }
     });
@@ -218,9 +228,8 @@ class BeamBvh final : public BeamAccel {
       throw std::runtime_error("Embree failed to build the beam BVH");
     anchor_ = (bounds.lo + bounds.hi) * 0.5;
     half_diagonal_ = 0.5 * length(bounds.hi - bounds.lo);
-    parallel_for_chunks(piece_count_, 8192, threads, [&](std::size_t i0, std::size_t i1) {
-      to_piece_lines(beams, prims_.data() + i0, i1 - i0);
-    });
+    parallel_for_chunks(piece_count_, 8192, threads,
+                        [&](std::size_t i0, std::size_t i1) { to_piece_lines(beams, prims_.data() + i0, i1 - i0); });
     for (const auto& [copy, count] : source.copies) to_piece_lines(beams, copy, count);
   }
 
@@ -274,9 +283,10 @@ class BeamBvh final : public BeamAccel {
       const float *nx = node.box[near_row[0]], *ny = node.box[near_row[1]], *nz = node.box[near_row[2]];
       const float *fx = node.box[far_row[0]], *fy = node.box[far_row[1]], *fz = node.box[far_row[2]];
 #if defined(__SSE2__)
-      const __m128 t0 = _mm_max_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(nx), org4[0]), inv4[0]),
-                                              _mm_mul_ps(_mm_sub_ps(_mm_load_ps(ny), org4[1]), inv4[1])),
-                                   _mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(nz), org4[2]), inv4[2]), _mm_setzero_ps()));
+      const __m128 t0 =
+          _mm_max_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(nx), org4[0]), inv4[0]),
+                                _mm_mul_ps(_mm_sub_ps(_mm_load_ps(ny), org4[1]), inv4[1])),
+                     _mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(nz), org4[2]), inv4[2]), _mm_setzero_ps()));
       const __m128 t1 = _mm_min_ps(_mm_min_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(fx), org4[0]), inv4[0]),
                                               _mm_mul_ps(_mm_sub_ps(_mm_load_ps(fy), org4[1]), inv4[1])),
                                    _mm_min_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(fz), org4[2]), inv4[2]), far4));
@@ -339,13 +349,16 @@ class BeamBvh final : public BeamAccel {
   // One piece's share of the 4-wide leaf test against one 4-wide node test (SAH): 0.25 beat 1 by
   // 12 % (camera pass), 0.125 and 0.5 are within noise of it.
   static constexpr float kPieceTestCost = 0.25f;
-  static constexpr int kStackSize = 256;           // > 3 * maximal depth + 1
+  static constexpr int kStackSize = 256;  // > 3 * maximal depth + 1
 
   // Embree builds with its own thread pool, sized here to the render's thread count; Embree's task
   // scheduler is shared by the process, though, and sized by its first device (see the arena).
   void use_device(int threads) {
     if (device_ && threads == device_threads_) return;
-    if (bvh_) { rtcReleaseBVH(bvh_); bvh_ = nullptr; }
+    if (bvh_) {
+      rtcReleaseBVH(bvh_);
+      bvh_ = nullptr;
+    }
     if (device_) rtcReleaseDevice(device_);
     const std::string config = "verbose=0,threads=" + std::to_string(threads);
     device_ = rtcNewDevice(config.c_str());

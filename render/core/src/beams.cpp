@@ -31,7 +31,10 @@ void sort_beams_spatially(std::vector<Beam>& beams, int threads) {
   auto midpoint = [](const Beam& b) { return b.origin + b.direction * (0.5 * b.length); };
   for (const Beam& b : beams) {
     const Vec3d m = midpoint(b);
-    for (int a = 0; a < 3; ++a) { lo[a] = std::min(lo[a], m[a]); hi[a] = std::max(hi[a], m[a]); }
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], m[a]);
+      hi[a] = std::max(hi[a], m[a]);
+    }
   }
   // (Morton code << 32) | index: sorting the keys sorts by code, then by the previous order.
   std::vector<std::uint64_t> keys(n);
@@ -58,7 +61,10 @@ void sort_beams_spatially(std::vector<Beam>& beams, int threads) {
     for (;;) {
       const std::size_t from = static_cast<std::uint32_t>(keys[slot]);
       keys[slot] = kDone;
-      if (from == start) { beams[slot] = std::move(held); break; }
+      if (from == start) {
+        beams[slot] = std::move(held);
+        break;
+      }
       beams[slot] = std::move(beams[from]);
       slot = from;
     }

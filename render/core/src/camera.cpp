@@ -27,9 +27,12 @@ CameraFrame make_camera_frame(const Camera& cam) {
   std::string axis = cam.fov_axis;
   if (axis == "smaller") axis = W <= H ? "x" : "y";
   if (axis == "larger") axis = W >= H ? "x" : "y";
-  if (axis == "x") f.tan_x = tan_half;
-  else if (axis == "y") f.tan_x = tan_half * aspect;
-  else f.tan_x = tan_half * aspect / std::sqrt(1.0 + aspect * aspect);
+  if (axis == "x")
+    f.tan_x = tan_half;
+  else if (axis == "y")
+    f.tan_x = tan_half * aspect;
+  else
+    f.tan_x = tan_half * aspect / std::sqrt(1.0 + aspect * aspect);
   f.tan_y = f.tan_x / aspect;
   return f;
 }
@@ -46,8 +49,8 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
   const double sx = (px + jx) / W, sy = (py + jy) / H;
   // Mitsuba's perspective sensor: +x of camera space is "left", film y points down.
   const CameraFrame& cam = p.camera;
-  Vec3d dir = normalize(cam.left * ((1.0 - 2.0 * sx) * cam.tan_x) + cam.up * ((1.0 - 2.0 * sy) * cam.tan_y) +
-                        cam.forward);
+  Vec3d dir =
+      normalize(cam.left * ((1.0 - 2.0 * sx) * cam.tan_x) + cam.up * ((1.0 - 2.0 * sy) * cam.tan_y) + cam.forward);
   const PixelSplat splat{scene.film, st.temporal_kernel, tile,
                          std::size_t(py - tile.y0) * tile.side + std::size_t(px - tile.x0)};
   Vec3d pos = cam.origin, weight{1, 1, 1};

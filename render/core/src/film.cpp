@@ -39,7 +39,10 @@ RenderResult average_state(RenderState& state) {
   auto to_float = [&](const std::vector<double>& src, std::vector<float>& dst, double* total) {
     dst.resize(src.size());
     double sum = 0.0;
-    for (std::size_t i = 0; i < src.size(); ++i) { dst[i] = float(src[i] * inv_n); sum += src[i] * inv_n; }
+    for (std::size_t i = 0; i < src.size(); ++i) {
+      dst[i] = float(src[i] * inv_n);
+      sum += src[i] * inv_n;
+    }
     if (total) *total = sum;
   };
   to_float(state.steady, result.steady, &stats.steady_total);
@@ -68,7 +71,10 @@ void TileFilm::flush(RenderState& st) {
     for (int ly = 0; ly < h; ++ly) {
       double* src = values.data() + q * plane + std::size_t(ly) * side * 3;
       double* dst = planes[q] + (std::size_t(y0 + ly) * W + x0) * 3;
-      for (int i = 0; i < 3 * w; ++i) { dst[i] += src[i]; src[i] = 0.0; }
+      for (int i = 0; i < 3 * w; ++i) {
+        dst[i] += src[i];
+        src[i] = 0.0;
+      }
     }
   const bool carry = !st.frames_carry.empty();
   for (int k = kmin; k <= kmax; ++k)
@@ -85,7 +91,10 @@ void TileFilm::flush(RenderState& st) {
           src[i] = 0.0;
         }
       } else {
-        for (int i = 0; i < 3 * w; ++i) { dst[i] = float(double(dst[i]) + src[i]); src[i] = 0.0; }
+        for (int i = 0; i < 3 * w; ++i) {
+          dst[i] = float(double(dst[i]) + src[i]);
+          src[i] = 0.0;
+        }
       }
     }
   kmin = std::numeric_limits<int>::max();

@@ -12,9 +12,8 @@
 namespace ptpb {
 
 // Beam×beam estimate along the query segment [0, t_q] of one camera segment (§4, §5).
-void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, const Vec3d& dir, double t_q,
-            int medium, const Vec3d& weight, double tau_c, int depth_c, std::vector<std::uint32_t>& cand,
-            TileStats& ts) {
+void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, const Vec3d& dir, double t_q, int medium,
+            const Vec3d& weight, double tau_c, int depth_c, std::vector<std::uint32_t>& cand, TileStats& ts) {
   const Scene& scene = p.cs->scene();
   const RenderSettings& st = *p.st;
   const Medium& m = scene.media[medium];
@@ -32,12 +31,21 @@ void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, cons
   const Vec3d query_weight = weight * m.sigma_s * p.inv_paths;
   for (std::uint32_t bi : cand) {
     const Beam& b = beams[bi];
-    if (b.medium != medium) { ++ts.false_positives; continue; }
+    if (b.medium != medium) {
+      ++ts.false_positives;
+      continue;
+    }
     if (st.max_depth >= 0 && b.light_depth + depth_c + 2 > st.max_depth) continue;
     const ClosestApproach ca = closest_approach(pos, dir, b.origin, b.direction);
     const PairTest verdict = test_beam_pair(ca, t_q, b.length, p.radius, st.parallel_guard_sin2);
-    if (verdict == PairTest::Parallel) { ++ts.parallel; continue; }
-    if (verdict == PairTest::Outside) { ++ts.false_positives; continue; }
+    if (verdict == PairTest::Parallel) {
+      ++ts.parallel;
+      continue;
+    }
+    if (verdict == PairTest::Outside) {
+      ++ts.false_positives;
+      continue;
+    }
     const double k_r = spatial_kernel_1d(st.spatial_kernel, ca.u, p.radius);
     const double phase = hg_eval(dot(b.direction, -dir), m.g);
     // Tr(t_c) Tr(s_b) in one exponential per channel; short beams divide by their survival.

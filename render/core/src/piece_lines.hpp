@@ -17,9 +17,9 @@ namespace ptpb::accel_detail {
 // its build box: the leaf's exact test then reads 32 contiguous bytes instead of the beam record,
 // and needs no division for the piece's share of the beam.
 struct PieceLine {
-  float origin[3];      // the piece's start, relative to the structure's anchor
-  float direction[3];   // the beam's direction
-  float length;         // the piece's share [0, length) of the beam parameter, from its start
+  float origin[3];     // the piece's start, relative to the structure's anchor
+  float direction[3];  // the beam's direction
+  float length;        // the piece's share [0, length) of the beam parameter, from its start
   std::uint32_t beam;
 };
 
@@ -76,10 +76,10 @@ inline int float_candidates4(const FloatQuery4& q, const PieceLine* p) {
   const float* f = reinterpret_cast<const float*>(p);
   __m128 ox = _mm_loadu_ps(f), oy = _mm_loadu_ps(f + 8), oz = _mm_loadu_ps(f + 16), bx = _mm_loadu_ps(f + 24);
   __m128 by = _mm_loadu_ps(f + 4), bz = _mm_loadu_ps(f + 12), len = _mm_loadu_ps(f + 20), beam = _mm_loadu_ps(f + 28);
-  _MM_TRANSPOSE4_PS(ox, oy, oz, bx);      // rows: origin x, y, z and direction x of the 4 pieces
-  _MM_TRANSPOSE4_PS(by, bz, len, beam);   // rows: direction y, z, length and the beam's bits
+  _MM_TRANSPOSE4_PS(ox, oy, oz, bx);     // rows: origin x, y, z and direction x of the 4 pieces
+  _MM_TRANSPOSE4_PS(by, bz, len, beam);  // rows: direction y, z, length and the beam's bits
   const __m128 wx = _mm_sub_ps(q.origin[0], ox), wy = _mm_sub_ps(q.origin[1], oy), wz = _mm_sub_ps(q.origin[2], oz);
-  const __m128 *c = q.direction;
+  const __m128* c = q.direction;
   const __m128 cx = _mm_sub_ps(_mm_mul_ps(c[1], bz), _mm_mul_ps(c[2], by));
   const __m128 cy = _mm_sub_ps(_mm_mul_ps(c[2], bx), _mm_mul_ps(c[0], bz));
   const __m128 cz = _mm_sub_ps(_mm_mul_ps(c[0], by), _mm_mul_ps(c[1], bx));

@@ -28,17 +28,16 @@ namespace ptpb {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 }  // namespace
 
 RenderResult render(const Scene& scene, const RenderSettings& settings, const ProgressCallback& progress,
                     std::optional<RenderState> resume, const CheckpointCallback& checkpoint) {
   validate_settings(settings);
-  check_memory_budget(scene, settings, resume.has_value() || (checkpoint && (settings.checkpoint_every_iterations > 0 ||
-                                                                        settings.checkpoint_every_s > 0)));
+  check_memory_budget(scene, settings,
+                      resume.has_value() || (checkpoint && (settings.checkpoint_every_iterations > 0 ||
+                                                            settings.checkpoint_every_s > 0)));
   const auto t_start = Clock::now();
   const CompiledScene cs(scene);
   const Camera& cam = scene.camera;
@@ -121,7 +120,8 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
 
     // 3. Camera pass by tiles; each tile owns its pixels.
     t0 = Clock::now();
-    if (it >= settings.compensated_sums_from && F > 0 && state.frames_carry.empty()) state.frames_carry.assign(frame_values, 0.0f);
+    if (it >= settings.compensated_sums_from && F > 0 && state.frames_carry.empty())
+      state.frames_carry.assign(frame_values, 0.0f);
     pass.beams = &beams;
     pass.accel = accel.get();
     pass.iteration = static_cast<std::uint64_t>(it);
@@ -133,27 +133,28 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     pass.surface_time_half_width = T_s;
     // Tiles add straight into the sums, so a pass is never left half done: a cancel that arrives
     // during it takes effect after it (DESIGN.md §9; the iteration is kept, not dropped).
-    parallel_for_chunks(std::size_t(tiles_x) * tiles_y, 1, settings.threads, [&](std::size_t t_begin, std::size_t t_end) {
-      std::vector<std::uint32_t> cand;
-      std::unique_ptr<TileFilm> tile = tile_films.take();
-      for (std::size_t t = t_begin; t < t_end; ++t) {
-        TileStats ts;
-        const int x0 = int(t % tiles_x) * settings.tile_size, y0 = int(t / tiles_x) * settings.tile_size;
-        const int x1 = std::min(W, x0 + settings.tile_size), y1 = std::min(H, y0 + settings.tile_size);
-        tile->place(x0, y0, x1 - x0, y1 - y0);
-        for (int y = y0; y < y1; ++y)
-          for (int x = x0; x < x1; ++x) trace_camera_path(pass, *tile, x, y, cand, ts);
-        tile->flush(state);
-        {
-          std::lock_guard<std::mutex> lock(stats_mutex);
-          ts.add_to(stats);
-        }
-        // Only the calling thread may talk to Python (signals are delivered to the main thread).
-        if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5)
-          report(int(it), R, T, beams.size(), r_s, photons.size());
-      }
-      tile_films.give_back(std::move(tile));
-    });
+    parallel_for_chunks(
+        std::size_t(tiles_x) * tiles_y, 1, settings.threads, [&](std::size_t t_begin, std::size_t t_end) {
+          std::vector<std::uint32_t> cand;
+          std::unique_ptr<TileFilm> tile = tile_films.take();
+          for (std::size_t t = t_begin; t < t_end; ++t) {
+            TileStats ts;
+            const int x0 = int(t % tiles_x) * settings.tile_size, y0 = int(t / tiles_x) * settings.tile_size;
+            const int x1 = std::min(W, x0 + settings.tile_size), y1 = std::min(H, y0 + settings.tile_size);
+            tile->place(x0, y0, x1 - x0, y1 - y0);
+            for (int y = y0; y < y1; ++y)
+              for (int x = x0; x < x1; ++x) trace_camera_path(pass, *tile, x, y, cand, ts);
+            tile->flush(state);
+            {
+              std::lock_guard<std::mutex> lock(stats_mutex);
+              ts.add_to(stats);
+            }
+            // Only the calling thread may talk to Python (signals are delivered to the main thread).
+            if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5)
+              report(int(it), R, T, beams.size(), r_s, photons.size());
+          }
+          tile_films.give_back(std::move(tile));
+        });
     stats.time_camera_s += seconds_since(t0);
     stats.iterations_done = int(it + 1);
     stats.light_paths += M;
@@ -167,8 +168,9 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     if (settings.snapshot_every > 0 && (it + 1) % settings.snapshot_every == 0) add_snapshot(state, it + 1, elapsed());
     report(int(it + 1), R, T, beams.size(), r_s, photons.size());
     // No checkpoint after the last planned iteration: the result itself follows at once.
-    const bool due = (settings.checkpoint_every_iterations > 0 && (it + 1) % settings.checkpoint_every_iterations == 0) ||
-                     (settings.checkpoint_every_s > 0 && seconds_since(last_checkpoint) >= settings.checkpoint_every_s);
+    const bool due =
+        (settings.checkpoint_every_iterations > 0 && (it + 1) % settings.checkpoint_every_iterations == 0) ||
+        (settings.checkpoint_every_s > 0 && seconds_since(last_checkpoint) >= settings.checkpoint_every_s);
     if (checkpointing && due && it + 1 < max_iterations && !cancel.load() && !save_checkpoint()) cancel.store(true);
   }
 

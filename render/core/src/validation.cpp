@@ -33,15 +33,16 @@ bool uses_frame_remainders(const RenderSettings& s) {
 }  // namespace
 
 void validate_settings(const RenderSettings& s) {
-  auto require = [](bool ok, const std::string& what) { if (!ok) throw std::invalid_argument(what); };
+  auto require = [](bool ok, const std::string& what) {
+    if (!ok) throw std::invalid_argument(what);
+  };
   require(s.iterations > 0 || s.time_budget_s > 0, "iterations must be > 0 (or give time_budget_s > 0)");
   require(std::isfinite(s.time_budget_s) && s.time_budget_s >= 0, "time_budget_s must be >= 0");
   require(s.light_paths_per_iteration > 0 && s.light_paths_per_iteration < (1ull << 32),
           "light_paths_per_iteration must lie in [1, 2^32)");
   require(!s.alpha || (*s.alpha > 0 && *s.alpha <= 1), "alpha must lie in (0, 1]");
   require(std::isfinite(s.initial_beam_radius) && s.initial_beam_radius > 0, "initial_beam_radius must be > 0 (m)");
-  require(!s.initial_time_half_width ||
-              (std::isfinite(*s.initial_time_half_width) && *s.initial_time_half_width > 0),
+  require(!s.initial_time_half_width || (std::isfinite(*s.initial_time_half_width) && *s.initial_time_half_width > 0),
           "initial_time_half_width must be > 0 (m of OPL)");
   require(s.parallel_guard_sin2 >= 0 && s.parallel_guard_sin2 < 1, "parallel_guard_sin2 must lie in [0, 1)");
   require(s.max_depth == -1 || s.max_depth >= 1, "max_depth must be -1 or >= 1");
@@ -61,13 +62,16 @@ void validate_settings(const RenderSettings& s) {
   require(s.checkpoint_every_iterations >= 0, "checkpoint_every_iterations must be >= 0");
   require(std::isfinite(s.checkpoint_every_s) && s.checkpoint_every_s >= 0, "checkpoint_every_s must be >= 0 (s)");
   require(s.compensated_sums_from >= 0, "compensated_sums_from must be >= 0");
-  require(std::isfinite(s.memory_budget_gib) && s.memory_budget_gib >= 0, "memory_budget_gib must be >= 0 (0: no limit)");
+  require(std::isfinite(s.memory_budget_gib) && s.memory_budget_gib >= 0,
+          "memory_budget_gib must be >= 0 (0: no limit)");
 }
 
 // A resume state must belong to this film, seed and bandwidth schedule: the bandwidths of its last
 // iteration are recomputed and compared bit for bit, which catches changed R_0, T_0, alpha or mode.
 void validate_resume(const RenderState& st, const Scene& scene, const RenderSettings& s, int W, int H, int F) {
-  auto require = [](bool ok, const std::string& what) { if (!ok) throw std::invalid_argument("resume state: " + what); };
+  auto require = [](bool ok, const std::string& what) {
+    if (!ok) throw std::invalid_argument("resume state: " + what);
+  };
   require(st.width == W && st.height == H && st.frame_count == F,
           "it holds a " + std::to_string(st.width) + " x " + std::to_string(st.height) + " film with " +
               std::to_string(st.frame_count) + " frames, the scene has " + std::to_string(W) + " x " +
@@ -78,18 +82,18 @@ void validate_resume(const RenderState& st, const Scene& scene, const RenderSett
           "its sums do not have the film's size");
   require(st.frames_carry.empty() || st.frames_carry.size() == st.frames.size(),
           "its frame remainders do not have the film's size");
-  require(st.frames_carry.empty() == (st.stats.iterations_done <= s.compensated_sums_from || F == 0),
-          st.frames_carry.empty() ? "it lacks the frame remainders a state past iteration " +
-                                        std::to_string(s.compensated_sums_from) + " holds"
-                                  : "it holds frame remainders before iteration " +
-                                        std::to_string(s.compensated_sums_from));
+  require(
+      st.frames_carry.empty() == (st.stats.iterations_done <= s.compensated_sums_from || F == 0),
+      st.frames_carry.empty()
+          ? "it lacks the frame remainders a state past iteration " + std::to_string(s.compensated_sums_from) + " holds"
+          : "it holds frame remainders before iteration " + std::to_string(s.compensated_sums_from));
   require(st.seed == s.seed, "it was rendered with seed " + std::to_string(st.seed) + ", the settings have seed " +
                                  std::to_string(s.seed));
   const int done = st.stats.iterations_done;
   require(done >= 0, "iterations_done must be >= 0");
   require(s.time_budget_s > 0 || done <= s.iterations,
-          "it already holds " + std::to_string(done) + " iterations, more than settings.iterations = " +
-              std::to_string(s.iterations));
+          "it already holds " + std::to_string(done) +
+              " iterations, more than settings.iterations = " + std::to_string(s.iterations));
   require(st.snapshot_iterations.size() == st.snapshots.size() && st.snapshot_seconds.size() == st.snapshots.size(),
           "its snapshot lists differ in length");
   for (const auto& snap : st.snapshots) require(snap.size() == px3, "a snapshot does not have the film's size");
@@ -116,8 +120,8 @@ double render_memory_bytes(const Scene& scene, const RenderSettings& s, bool sta
   // place into the result), with as many remainders in a long run; a double tile film per thread.
   const double planes = 3.0 * px3 * (sizeof(double) + sizeof(float));
   const double frames = F * px3 * sizeof(float) * (uses_frame_remainders(s) ? 2.0 : 1.0);
-  const double tiles = double(resolve_thread_count(s.threads)) * double(s.tile_size) * s.tile_size * 3.0 * (3.0 + F) *
-                       sizeof(double);
+  const double tiles =
+      double(resolve_thread_count(s.threads)) * double(s.tile_size) * s.tile_size * 3.0 * (3.0 + F) * sizeof(double);
   double bytes = planes + frames + tiles + snapshot_bytes;
   if (state_copy) bytes += 3.0 * px3 * sizeof(double) + frames + snapshot_bytes;
   return bytes;

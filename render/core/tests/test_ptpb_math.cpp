@@ -170,7 +170,11 @@ TEST_CASE("closest approach against brute-force minimisation") {
         for (int j = -10; j <= 10; ++j) {
           const double t = ct + span * i / 10, s = cs + span * j / 10;
           const double dist = length((xc + wc * t) - (xb + wb * s));
-          if (dist < best) { best = dist; bt = t; bs = s; }
+          if (dist < best) {
+            best = dist;
+            bt = t;
+            bs = s;
+          }
         }
       span *= 0.3;
     }

@@ -228,7 +228,10 @@ TEST_CASE("cancellation keeps the completed iterations") {
   RenderSettings s = small_settings();
   s.iterations = 10;
   int calls = 0;
-  const RenderResult r = render(cube_scene(), s, [&](const Progress& p) { ++calls; return p.iteration < 2; });
+  const RenderResult r = render(cube_scene(), s, [&](const Progress& p) {
+    ++calls;
+    return p.iteration < 2;
+  });
   CHECK(r.stats.cancelled);
   CHECK(r.stats.iterations_done == 2);
   CHECK(calls >= 2);
@@ -308,7 +311,10 @@ TEST_CASE("a resume state from other settings or another film is refused with th
   RenderSettings s = small_settings();
   s.checkpoint_every_iterations = 1;
   std::vector<RenderState> states;
-  render(sc, s, nullptr, std::nullopt, [&](const RenderState& st) { states.push_back(st); return true; });
+  render(sc, s, nullptr, std::nullopt, [&](const RenderState& st) {
+    states.push_back(st);
+    return true;
+  });
   CHECK(states.size() == 2);
   if (states.empty()) return;
   RenderSettings other = s;
@@ -333,15 +339,21 @@ TEST_CASE("a cancelled render hands its completed iterations to the checkpoint c
   s.iterations = 10;
   s.checkpoint_every_iterations = 100;  // never due: only the cancellation checkpoints
   std::vector<int> saved;
-  const RenderResult r = render(cube_scene(), s, [](const Progress& p) { return p.iteration < 2; }, std::nullopt,
-                                [&](const RenderState& st) { saved.push_back(st.stats.iterations_done); return true; });
+  const RenderResult r = render(
+      cube_scene(), s, [](const Progress& p) { return p.iteration < 2; }, std::nullopt,
+      [&](const RenderState& st) {
+        saved.push_back(st.stats.iterations_done);
+        return true;
+      });
   CHECK(r.stats.cancelled && r.stats.iterations_done == 2);
   CHECK(saved.size() == 1 && saved[0] == 2);
   // A false return from the checkpoint callback cancels like the progress callback.
   s.checkpoint_every_iterations = 1;
   saved.clear();
-  const RenderResult c = render(cube_scene(), s, nullptr, std::nullopt,
-                                [&](const RenderState& st) { saved.push_back(st.stats.iterations_done); return false; });
+  const RenderResult c = render(cube_scene(), s, nullptr, std::nullopt, [&](const RenderState& st) {
+    saved.push_back(st.stats.iterations_done);
+    return false;
+  });
   CHECK(c.stats.cancelled && c.stats.iterations_done == 1 && saved.size() == 1);
 }
 

@@ -135,8 +135,8 @@ TEST_CASE("a gather on a uniform photon field returns its flux density") {
       }
     const double mean = sum / points;
     std::printf("uniform field (%s): mean %.5f vs %.5f (%.3f%%), sigma of one gather %.3f%%, worst %.2f sigma\n",
-                k == SpatialKernel::Box ? "box" : "epanechnikov", mean, E, 100.0 * (mean / E - 1.0),
-                100.0 * sigma / E, worst);
+                k == SpatialKernel::Box ? "box" : "epanechnikov", mean, E, 100.0 * (mean / E - 1.0), 100.0 * sigma / E,
+                worst);
     CHECK(worst < 4.5);
     CHECK_NEAR(mean, E, 4.0 * sigma / std::sqrt(double(points)));
   }
@@ -214,7 +214,8 @@ TEST_CASE("a sunlit diffuse plane renders E cos(theta) rho / pi; max_depth 1 lea
     double mean = 0.0;
     for (float v : r.steady) mean += v;
     mean /= double(r.steady.size());
-    std::printf("sunlit plane at %.0f deg: %.5f vs %.5f (%.2f%%)\n", deg, mean, expected, 100.0 * (mean / expected - 1.0));
+    std::printf("sunlit plane at %.0f deg: %.5f vs %.5f (%.2f%%)\n", deg, mean, expected,
+                100.0 * (mean / expected - 1.0));
     CHECK_CLOSE(mean, expected, 0.03);
   }
   RenderSettings s = plane_settings();

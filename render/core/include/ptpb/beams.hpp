@@ -12,14 +12,14 @@ namespace ptpb {
 
 struct Beam {
   Vec3d origin{};
-  Vec3d direction{};     // unit, along the light's travel
-  double length = 0.0;   // s_max, m
-  Vec3d power{};         // Phi_b: path throughput at the origin, before attenuation along the beam
-  double tau0 = 0.0;     // OPL at the origin, m (from the light's time origin)
+  Vec3d direction{};    // unit, along the light's travel
+  double length = 0.0;  // s_max, m
+  Vec3d power{};        // Phi_b: path throughput at the origin, before attenuation along the beam
+  double tau0 = 0.0;    // OPL at the origin, m (from the light's time origin)
   int medium = kVacuum;
   BeamKind kind = BeamKind::Long;
-  int light_depth = 0;   // non-null interactions before the origin
-  bool timeless = false; // from an emitter without a time origin: steady image only
+  int light_depth = 0;    // non-null interactions before the origin
+  bool timeless = false;  // from an emitter without a time origin: steady image only
   std::uint32_t path = 0;
 };
 

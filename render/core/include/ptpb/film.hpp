@@ -43,9 +43,15 @@ struct TileFilm {
   int x0 = 0, y0 = 0, w = 0, h = 0;  // the film pixels the tile holds now
 
   TileFilm(int tile_size, int frame_count)
-      : side(tile_size), plane(std::size_t(tile_size) * tile_size * 3),
+      : side(tile_size),
+        plane(std::size_t(tile_size) * tile_size * 3),
         values(plane * (3 + std::size_t(frame_count)), 0.0) {}
-  void place(int x, int y, int width, int height) { x0 = x; y0 = y; w = width; h = height; }
+  void place(int x, int y, int width, int height) {
+    x0 = x;
+    y0 = y;
+    w = width;
+    h = height;
+  }
   double* steady(std::size_t local) { return values.data() + 3 * local; }
   double* early(std::size_t local) { return values.data() + plane + 3 * local; }
   double* late(std::size_t local) { return values.data() + 2 * plane + 3 * local; }
@@ -85,17 +91,25 @@ struct PixelSplat {
   // T: the temporal half-width of gate mode; beams and surfaces each pass their own T_i.
   void add(double tau, const Vec3d& v, bool timeless, double T) const {
     double* s = tile.steady(local);
-    s[0] += v.x; s[1] += v.y; s[2] += v.z;
+    s[0] += v.x;
+    s[1] += v.y;
+    s[2] += v.z;
     if (film.mode == FrameMode::Steady || timeless) return;
     const double rel = (tau - film.start_opl) / film.bin_width_opl;
     const int F = film.temporal_bins;
     double* side = rel < 0 ? tile.early(local) : (rel >= F ? tile.late(local) : nullptr);
-    if (side) { side[0] += v.x; side[1] += v.y; side[2] += v.z; }
+    if (side) {
+      side[0] += v.x;
+      side[1] += v.y;
+      side[2] += v.z;
+    }
     if (film.mode == FrameMode::Bins) {
       if (side) return;
       const int k = std::min(F - 1, static_cast<int>(std::floor(rel)));
       double* f = tile.frame(k, local);
-      f[0] += v.x; f[1] += v.y; f[2] += v.z;
+      f[0] += v.x;
+      f[1] += v.y;
+      f[2] += v.z;
       return;
     }
     // Gate: every frame centre within T of tau gets the temporal kernel's weight (§5).
@@ -110,7 +124,9 @@ struct PixelSplat {
       const double w = temporal_kernel(kernel, tk - tau, T);
       if (w == 0.0) continue;
       double* f = tile.frame(k, local);
-      f[0] += w * v.x; f[1] += w * v.y; f[2] += w * v.z;
+      f[0] += w * v.x;
+      f[1] += w * v.y;
+      f[2] += w * v.z;
     }
   }
 };

@@ -20,7 +20,8 @@ inline double survival_mixture(const Vec3d& sigma_t, double s) {
 }
 inline double pdf_mixture(const Vec3d& sigma_t, double s) {
   return (sigma_t.x * std::exp(-sigma_t.x * s) + sigma_t.y * std::exp(-sigma_t.y * s) +
-          sigma_t.z * std::exp(-sigma_t.z * s)) / 3.0;
+          sigma_t.z * std::exp(-sigma_t.z * s)) /
+         3.0;
 }
 inline Vec3d transmittance(const Vec3d& sigma_t, double s) {
   return {std::exp(-sigma_t.x * s), std::exp(-sigma_t.y * s), std::exp(-sigma_t.z * s)};

@@ -19,8 +19,8 @@ struct LightRecords {
 
 // Traces light path `path_index` of iteration `iteration` and appends its beams and surface
 // photons, each in the order the path made them.
-void trace_light_path(const CompiledScene& scene, const RenderSettings& settings,
-                      std::uint64_t iteration, std::uint64_t path_index, LightRecords& out);
+void trace_light_path(const CompiledScene& scene, const RenderSettings& settings, std::uint64_t iteration,
+                      std::uint64_t path_index, LightRecords& out);
 
 // Traces the settings.light_paths_per_iteration paths of one iteration into `beams` and `photons`
 // (cleared first), in path order whatever the thread count (§9). The vectors keep their capacity

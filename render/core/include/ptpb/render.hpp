@@ -13,10 +13,10 @@
 namespace ptpb {
 
 struct Progress {
-  int iteration = 0;       // iterations completed
-  int iterations = 0;      // planned
+  int iteration = 0;   // iterations completed
+  int iterations = 0;  // planned
   double elapsed_s = 0.0;
-  double radius = 0.0;     // R_i of the iteration in flight or just done
+  double radius = 0.0;  // R_i of the iteration in flight or just done
   double time_half_width = 0.0;
   std::uint64_t beams = 0;
   double surface_radius = 0.0;  // r_i of the surface photons
@@ -38,7 +38,7 @@ struct RenderStats {
   double time_surface_build_s = 0;
   double final_surface_radius = 0, final_surface_time_half_width = 0;
   double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check
-  Schedule schedule;  // the bandwidth schedule this run resolved and used (§6)
+  Schedule schedule;                                         // the bandwidth schedule this run resolved and used (§6)
 };
 
 // The accumulated state of a progressive render after stats.iterations_done iterations: the sums
@@ -67,11 +67,11 @@ using CheckpointCallback = std::function<bool(const RenderState&)>;
 
 struct RenderResult {
   int width = 0, height = 0, frame_count = 0;
-  std::vector<float> steady;  // H x W x 3
-  std::vector<float> frames;  // F x H x W x 3
+  std::vector<float> steady;       // H x W x 3
+  std::vector<float> frames;       // F x H x W x 3
   std::vector<float> early, late;  // H x W x 3: energy before / after the frame window
   std::vector<int> snapshot_iterations;
-  std::vector<double> snapshot_seconds;  // wall time since the start of the render, per snapshot
+  std::vector<double> snapshot_seconds;       // wall time since the start of the render, per snapshot
   std::vector<std::vector<float>> snapshots;  // steady averages, H x W x 3 each
   RenderStats stats;
 };
@@ -80,8 +80,7 @@ struct RenderResult {
 // `resume`: continue from a state an earlier run of the same scene and settings handed to its
 // checkpoint callback (refused when its film, seed or bandwidth schedule differ). `checkpoint`
 // receives the state as settings.checkpoint_every_* ask.
-RenderResult render(const Scene& scene, const RenderSettings& settings,
-                    const ProgressCallback& progress = nullptr, std::optional<RenderState> resume = std::nullopt,
-                    const CheckpointCallback& checkpoint = nullptr);
+RenderResult render(const Scene& scene, const RenderSettings& settings, const ProgressCallback& progress = nullptr,
+                    std::optional<RenderState> resume = std::nullopt, const CheckpointCallback& checkpoint = nullptr);
 
 }  // namespace ptpb

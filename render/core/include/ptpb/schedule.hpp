@@ -9,11 +9,11 @@ namespace ptpb {
 // The bandwidth schedule with every default resolved: what a render runs and reports in its stats.
 // The core owns these defaults; callers leave a setting unset to get them.
 struct Schedule {
-  double alpha = 0.0;                   // beams' kernel-volume parameter
-  double initial_beam_radius = 0.0;     // R_0, m
-  double initial_time_half_width = 0.0;  // T_0, m of OPL (gate mode)
-  double surface_alpha = 0.0;           // surface photons' kernel-volume parameter
-  double initial_surface_radius = 0.0;  // r_0, m
+  double alpha = 0.0;                            // beams' kernel-volume parameter
+  double initial_beam_radius = 0.0;              // R_0, m
+  double initial_time_half_width = 0.0;          // T_0, m of OPL (gate mode)
+  double surface_alpha = 0.0;                    // surface photons' kernel-volume parameter
+  double initial_surface_radius = 0.0;           // r_0, m
   double initial_surface_time_half_width = 0.0;  // m of OPL (gate mode)
 };
 

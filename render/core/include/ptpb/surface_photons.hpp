@@ -11,11 +11,11 @@
 namespace ptpb {
 
 struct SurfacePhoton {
-  Vec3d position{};       // x_p on the surface
-  Vec3d direction{};      // unit incident direction, along the light's travel
-  Vec3d normal{};         // unit surface normal on the side the light arrived from
-  Vec3d power{};          // Phi_p: path throughput on arrival, before the albedo, W
-  double tau = 0.0;       // arrival OPL tau_p, m (from the light's time origin)
+  Vec3d position{};   // x_p on the surface
+  Vec3d direction{};  // unit incident direction, along the light's travel
+  Vec3d normal{};     // unit surface normal on the side the light arrived from
+  Vec3d power{};      // Phi_p: path throughput on arrival, before the albedo, W
+  double tau = 0.0;   // arrival OPL tau_p, m (from the light's time origin)
   std::uint32_t shape = 0;
   int light_depth = 0;    // non-null interactions before the hit
   bool timeless = false;  // from an emitter without a time origin: steady image only

@@ -10,8 +10,7 @@ namespace ptpb {
 void validate_settings(const RenderSettings& settings);
 
 // A resume state must belong to this film (W x H, F frames), seed and bandwidth schedule.
-void validate_resume(const RenderState& state, const Scene& scene, const RenderSettings& settings, int W, int H,
-                     int F);
+void validate_resume(const RenderState& state, const Scene& scene, const RenderSettings& settings, int W, int H, int F);
 
 // Peak bytes of render()'s image buffers (§9 "Memory"): the double sums of steady, early and late
 // (H W 3 each), the float32 frame sums (F H W 3; twice that with the remainders of a run past
