@@ -1,19 +1,25 @@
-"""Types of the private extension module render._core (render/core/bindings/*.cpp); keep in step with them."""
+"""Typed stub of render._core, the C++ core (render/core/bindings): the Embree ray engine and the
+PTPB renderer. Scene and settings travel as plain dicts (built by render/ptpb/settings.py and render/ptpb/api.py); see
+render/core/bindings/convert_ptpb.cpp for their keys. Lengths are in metres, times in metres of OPL."""
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-# register_raytrace.cpp
+# Embree ray engine (register_raytrace.cpp)
+
 INVALID_ID: int
+"""prim/mesh id of a ray that hit nothing."""
 
 class RayScene:
     """Triangle meshes traced by Embree 3. Add meshes, commit, then query."""
 
     def __init__(self) -> None: ...
-    def add_mesh(self, vertices: npt.ArrayLike, faces: npt.ArrayLike, mesh_id: int) -> None: ...
+    def add_mesh(self, vertices: npt.ArrayLike, faces: npt.ArrayLike, mesh_id: int) -> None:
+        """vertices (N, 3) float32, faces (M, 3) uint32."""
+
     def commit(self) -> None: ...
     @property
     def committed(self) -> bool: ...
@@ -22,7 +28,9 @@ class RayScene:
     @property
     def triangle_count(self) -> int: ...
     @property
-    def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]: ...
+    def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """(lower, upper) corners of the committed scene's box."""
+
     def intersect(
         self,
         origins: npt.ArrayLike,
@@ -30,7 +38,12 @@ class RayScene:
         tnear: float = 0.0,
         tfar: npt.ArrayLike | None = None,
         threads: int = 0,
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32], npt.NDArray[np.uint32], npt.NDArray[np.float32]]: ...
+    ) -> tuple[
+        npt.NDArray[np.float32], npt.NDArray[np.uint32], npt.NDArray[np.uint32], npt.NDArray[np.float32]
+    ]:
+        """Closest hits of N rays: (t (N,), prim id (N,), mesh id (N,), normal (N, 3)); misses have
+        t = inf and ids INVALID_ID. The GIL is released."""
+
     def occluded(
         self,
         origins: npt.ArrayLike,
@@ -38,18 +51,43 @@ class RayScene:
         tnear: float = 0.0,
         tfar: npt.ArrayLike | None = None,
         threads: int = 0,
-    ) -> npt.NDArray[np.bool_]: ...
+    ) -> npt.NDArray[np.bool_]:
+        """Whether each of N rays hits anything within [tnear, tfar]. The GIL is released."""
 
-# register_ptpb.cpp
+# PTPB renderer (register_ptpb.cpp)
+
 SPEED_OF_LIGHT: float
+"""m/s."""
 PS_PER_M_OPL: float
+"""Picoseconds per metre of optical path length."""
 
 def ptpb_render(
-    scene: dict[str, Any],
-    settings: dict[str, Any],
+    scene: Mapping[str, Any],
+    settings: Mapping[str, Any],
     progress: Callable[[dict[str, Any]], bool | None] | None = None,
-    resume: dict[str, Any] | None = None,
+    resume: Mapping[str, Any] | None = None,
     checkpoint: Callable[[dict[str, Any]], bool | None] | None = None,
-) -> dict[str, Any]: ...
-def ptpb_memory_bytes(scene: dict[str, Any], settings: dict[str, Any], state_copy: bool = False) -> float: ...
-def ptpb_schedule_gamma(iteration: int, alpha: float) -> float: ...
+) -> dict[str, Any]:
+    """Render a scene dict with the PTPB renderer; returns a dict of arrays and statistics.
+
+    Returns ``steady`` (H, W, 3), ``frames`` (F, H, W, 3), ``early`` and ``late`` (H, W, 3), all
+    float32; ``snapshots`` (a list of (iteration, (H, W, 3) array)); ``snapshot_seconds``; and
+    ``stats`` (counters, timings, final bandwidths, cancelled/interrupted, window fractions), which
+    also reports the schedule the core resolved from the settings and its defaults (ptpb.md §6):
+    ``alpha`` (unset: 2/3 in gate, 4/5 in bins/steady), ``surface_alpha`` (unset: 4/7 in gate, 2/3
+    otherwise), ``initial_beam_radius_m``, ``initial_time_half_width_m`` (unset: R_0),
+    ``initial_surface_radius_m`` (unset: R_0) and ``initial_surface_time_half_width_m`` (unset: the
+    beams' T_0). A missing or None settings key is unset.
+
+    The GIL is released while rendering; ``progress(info) -> bool|None`` is called about twice a
+    second and after each iteration; returning False or Ctrl-C stops when the iteration under way is
+    complete. ``checkpoint(state) -> bool|None`` receives the accumulated state (sums, stats,
+    snapshots) every settings.checkpoint_every_iterations iterations or checkpoint_every_s seconds,
+    and once more on cancellation; ``resume=state`` continues it. Bad input raises ValueError naming
+    the key."""
+
+def ptpb_memory_bytes(scene: Mapping[str, Any], settings: Mapping[str, Any], state_copy: bool = False) -> float:
+    """Peak bytes of the render's image buffers, as checked against settings.memory_budget_gib."""
+
+def ptpb_schedule_gamma(iteration: int, alpha: float) -> float:
+    """Kernel-volume factor gamma_i = prod_{k=1..i} (k + alpha) / (k + 1), gamma_0 = 1."""

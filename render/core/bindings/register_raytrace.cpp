@@ -16,8 +16,7 @@ using IndexArray = py::array_t<std::uint32_t, py::array::c_style | py::array::fo
 
 void require_n_by_3(const py::array& a, const char* name) {
   if (a.ndim() != 2 || a.shape(1) != 3) {
-    throw py::value_error(std::string(name) + " must have shape (N, 3), got ndim=" +
-                          std::to_string(a.ndim()));
+    throw py::value_error(std::string(name) + " must have shape (N, 3), got ndim=" + std::to_string(a.ndim()));
   }
 }
 
@@ -27,14 +26,12 @@ struct RayBatch {
   bool has_tfar = false;
 };
 
-RayBatch check_rays(const FloatArray& origins, const FloatArray& directions,
-                    const py::object& tfar) {
+RayBatch check_rays(const FloatArray& origins, const FloatArray& directions, const py::object& tfar) {
   require_n_by_3(origins, "origins");
   require_n_by_3(directions, "directions");
   if (origins.shape(0) != directions.shape(0)) {
     throw py::value_error("origins and directions must have the same number of rows (" +
-                          std::to_string(origins.shape(0)) + " vs " +
-                          std::to_string(directions.shape(0)) + ")");
+                          std::to_string(origins.shape(0)) + " vs " + std::to_string(directions.shape(0)) + ")");
   }
   RayBatch batch{origins, directions, FloatArray(), static_cast<std::size_t>(origins.shape(0))};
   if (!tfar.is_none()) {
@@ -50,17 +47,15 @@ RayBatch check_rays(const FloatArray& origins, const FloatArray& directions,
 }  // namespace
 
 void register_raytrace(py::module_& m) {
-  py::class_<ptpb::RayScene>(m, "RayScene",
-                             "Triangle meshes traced by Embree 3. Add meshes, commit, then query.")
+  py::class_<ptpb::RayScene>(m, "RayScene", "Triangle meshes traced by Embree 3. Add meshes, commit, then query.")
       .def(py::init<>())
       .def(
           "add_mesh",
-          [](ptpb::RayScene& self, const FloatArray& vertices, const IndexArray& faces,
-             std::uint32_t mesh_id) {
+          [](ptpb::RayScene& self, const FloatArray& vertices, const IndexArray& faces, std::uint32_t mesh_id) {
             require_n_by_3(vertices, "vertices");
             require_n_by_3(faces, "faces");
-            self.add_mesh(vertices.data(), static_cast<std::size_t>(vertices.shape(0)),
-                          faces.data(), static_cast<std::size_t>(faces.shape(0)), mesh_id);
+            self.add_mesh(vertices.data(), static_cast<std::size_t>(vertices.shape(0)), faces.data(),
+                          static_cast<std::size_t>(faces.shape(0)), mesh_id);
           },
           py::arg("vertices"), py::arg("faces"), py::arg("mesh_id"))
       .def("commit", &ptpb::RayScene::commit, py::call_guard<py::gil_scoped_release>())
@@ -70,14 +65,13 @@ void register_raytrace(py::module_& m) {
       .def_property_readonly("bounds",
                              [](const ptpb::RayScene& self) {
                                const auto b = self.bounds();
-                               return py::make_tuple(
-                                   py::make_tuple(b.lower.x, b.lower.y, b.lower.z),
-                                   py::make_tuple(b.upper.x, b.upper.y, b.upper.z));
+                               return py::make_tuple(py::make_tuple(b.lower.x, b.lower.y, b.lower.z),
+                                                     py::make_tuple(b.upper.x, b.upper.y, b.upper.z));
                              })
       .def(
           "intersect",
-          [](const ptpb::RayScene& self, const FloatArray& origins, const FloatArray& directions,
-             float tnear, const py::object& tfar, int threads) {
+          [](const ptpb::RayScene& self, const FloatArray& origins, const FloatArray& directions, float tnear,
+             const py::object& tfar, int threads) {
             if (!self.committed()) throw std::logic_error("commit() the scene before intersect()");
             RayBatch batch = check_rays(origins, directions, tfar);
             const auto n = static_cast<py::ssize_t>(batch.n);
@@ -91,17 +85,17 @@ void register_raytrace(py::module_& m) {
             {
               py::gil_scoped_release release;
               self.intersect_batch(batch.origins.data(), batch.directions.data(), batch.n, tnear,
-                                   batch.has_tfar ? batch.tfar.data() : nullptr, t_ptr, prim_ptr,
-                                   mesh_ptr, normal_ptr, threads);
+                                   batch.has_tfar ? batch.tfar.data() : nullptr, t_ptr, prim_ptr, mesh_ptr, normal_ptr,
+                                   threads);
             }
             return py::make_tuple(t_out, prim_out, mesh_out, normal_out);
           },
-          py::arg("origins"), py::arg("directions"), py::arg("tnear") = 0.0f,
-          py::arg("tfar") = py::none(), py::arg("threads") = 0)
+          py::arg("origins"), py::arg("directions"), py::arg("tnear") = 0.0f, py::arg("tfar") = py::none(),
+          py::arg("threads") = 0)
       .def(
           "occluded",
-          [](const ptpb::RayScene& self, const FloatArray& origins, const FloatArray& directions,
-             float tnear, const py::object& tfar, int threads) {
+          [](const ptpb::RayScene& self, const FloatArray& origins, const FloatArray& directions, float tnear,
+             const py::object& tfar, int threads) {
             if (!self.committed()) throw std::logic_error("commit() the scene before occluded()");
             RayBatch batch = check_rays(origins, directions, tfar);
             py::array_t<bool> out(static_cast<py::ssize_t>(batch.n));
@@ -113,7 +107,7 @@ void register_raytrace(py::module_& m) {
             }
             return out;
           },
-          py::arg("origins"), py::arg("directions"), py::arg("tnear") = 0.0f,
-          py::arg("tfar") = py::none(), py::arg("threads") = 0);
+          py::arg("origins"), py::arg("directions"), py::arg("tnear") = 0.0f, py::arg("tfar") = py::none(),
+          py::arg("threads") = 0);
   m.attr("INVALID_ID") = ptpb::kInvalidId;
 }

@@ -19,9 +19,9 @@ void require(bool ok, const std::string& what) {
 }
 
 void require_medium_id(int id, std::size_t count, const std::string& where) {
-  require(id == kVacuum || (id >= 0 && static_cast<std::size_t>(id) < count),
-          where + ": medium id " + std::to_string(id) + " out of range (" + std::to_string(count) +
-              " media; -1 = vacuum)");
+  require(
+      id == kVacuum || (id >= 0 && static_cast<std::size_t>(id) < count),
+      where + ": medium id " + std::to_string(id) + " out of range (" + std::to_string(count) + " media; -1 = vacuum)");
 }
 
 Vec3d vertex(const Shape& s, std::uint32_t i) {
@@ -59,8 +59,7 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
     require_medium_id(s.exterior, scene.media.size(), where + ".exterior");
     require(finite_nonneg(s.radiance), where + ".radiance must be finite and >= 0");
     if (s.kind == SurfaceKind::Diffuse) {
-      require(finite_nonneg(s.albedo) && max_component(s.albedo) <= 1.0,
-              where + ".albedo must lie in [0, 1]");
+      require(finite_nonneg(s.albedo) && max_component(s.albedo) <= 1.0, where + ".albedo must lie in [0, 1]");
     }
     rays_.add_mesh(s.vertices.data(), s.vertices.size() / 3, s.faces.data(), s.faces.size() / 3,
                    static_cast<std::uint32_t>(mesh_id));
@@ -90,11 +89,12 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
   if (scene.shapes.empty()) {
     lo = hi = Vec3d{0, 0, 0};
   }
-  // Mitsuba's bounding sphere of the shapes' bounding box (ptpb.md §1).
+  // Mitsuba's bounding sphere of the shapes' bounding box (DESIGN.md §1).
   sphere_center_ = (lo + hi) * 0.5;
   sphere_radius_ = std::max(length(hi - sphere_center_), 1e-4);
-  ray_epsilon_ = 1e-6 * std::max(1.0, std::max(max_component(Vec3d{std::fabs(lo.x), std::fabs(lo.y), std::fabs(lo.z)}),
-                                               max_component(Vec3d{std::fabs(hi.x), std::fabs(hi.y), std::fabs(hi.z)})));
+  ray_epsilon_ =
+      1e-6 * std::max(1.0, std::max(max_component(Vec3d{std::fabs(lo.x), std::fabs(lo.y), std::fabs(lo.z)}),
+                                    max_component(Vec3d{std::fabs(hi.x), std::fabs(hi.y), std::fabs(hi.z)})));
   ray_epsilon_ *= 10.0;
 
   for (std::size_t i = 0; i < scene.point_lights.size(); ++i) {
@@ -125,8 +125,8 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
   const Camera& cam = scene.camera;
   require(cam.width > 0 && cam.height > 0, "camera width and height must be > 0");
   require(cam.fov_deg > 0 && cam.fov_deg < 180, "camera fov must lie in (0, 180) degrees");
-  require(cam.fov_axis == "x" || cam.fov_axis == "y" || cam.fov_axis == "diagonal" ||
-              cam.fov_axis == "smaller" || cam.fov_axis == "larger",
+  require(cam.fov_axis == "x" || cam.fov_axis == "y" || cam.fov_axis == "diagonal" || cam.fov_axis == "smaller" ||
+              cam.fov_axis == "larger",
           "camera fov_axis must be x, y, diagonal, smaller or larger, got '" + cam.fov_axis + "'");
   require(all_finite(cam.origin) && all_finite(cam.target) && all_finite(cam.up), "camera vectors must be finite");
   require(length(cam.target - cam.origin) > 0, "camera target must differ from its origin");

@@ -44,9 +44,8 @@ RayScene::~RayScene() {
   if (impl_->device) rtcReleaseDevice(impl_->device);
 }
 
-void RayScene::add_mesh(const float* vertices, std::size_t vertex_count,
-                        const std::uint32_t* faces, std::size_t face_count,
-                        std::uint32_t mesh_id) {
+void RayScene::add_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
+                        std::size_t face_count, std::uint32_t mesh_id) {
   if (committed_) throw std::logic_error("add_mesh called after commit()");
   if (vertex_count < 3 || face_count == 0) {
     throw std::invalid_argument("mesh " + std::to_string(mesh_id) +
@@ -55,27 +54,25 @@ void RayScene::add_mesh(const float* vertices, std::size_t vertex_count,
   if (mesh_id == kInvalidId) throw std::invalid_argument("mesh id 4294967295 is reserved");
   for (std::size_t i = 0; i < 3 * vertex_count; ++i) {
     if (!std::isfinite(vertices[i])) {
-      throw std::invalid_argument("mesh " + std::to_string(mesh_id) + ": vertex " +
-                                  std::to_string(i / 3) + " has a non-finite coordinate");
+      throw std::invalid_argument("mesh " + std::to_string(mesh_id) + ": vertex " + std::to_string(i / 3) +
+                                  " has a non-finite coordinate");
     }
   }
   for (std::size_t i = 0; i < 3 * face_count; ++i) {
     if (faces[i] >= vertex_count) {
-      throw std::invalid_argument("mesh " + std::to_string(mesh_id) + ": face " +
-                                  std::to_string(i / 3) + " refers to vertex " +
-                                  std::to_string(faces[i]) + " but the mesh has only " +
+      throw std::invalid_argument("mesh " + std::to_string(mesh_id) + ": face " + std::to_string(i / 3) +
+                                  " refers to vertex " + std::to_string(faces[i]) + " but the mesh has only " +
                                   std::to_string(vertex_count) + " vertices");
     }
   }
   RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vbuf = static_cast<float*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertex_count));
-  auto* ibuf = static_cast<std::uint32_t*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(std::uint32_t), face_count));
+  auto* vbuf = static_cast<float*>(
+      rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertex_count));
+  auto* ibuf = static_cast<std::uint32_t*>(
+      rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(std::uint32_t), face_count));
   if (!vbuf || !ibuf) {
     rtcReleaseGeometry(geom);
-    throw std::runtime_error("Embree could not allocate buffers for mesh " +
-                             std::to_string(mesh_id));
+    throw std::runtime_error("Embree could not allocate buffers for mesh " + std::to_string(mesh_id));
   }
   std::copy(vertices, vertices + 3 * vertex_count, vbuf);
   std::copy(faces, faces + 3 * face_count, ibuf);
@@ -107,13 +104,16 @@ void RayScene::require_committed() const {
   if (!committed_) throw std::logic_error("RayScene must be committed before it is queried");
 }
 
-Hit RayScene::intersect(const Vec3f& origin, const Vec3f& direction, float tnear,
-                        float tfar) const {
+Hit RayScene::intersect(const Vec3f& origin, const Vec3f& direction, float tnear, float tfar) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh;
-  rh.ray.org_x = origin.x; rh.ray.org_y = origin.y; rh.ray.org_z = origin.z;
-  rh.ray.dir_x = direction.x; rh.ray.dir_y = direction.y; rh.ray.dir_z = direction.z;
+  rh.ray.org_x = origin.x;
+  rh.ray.org_y = origin.y;
+  rh.ray.org_z = origin.z;
+  rh.ray.dir_x = direction.x;
+  rh.ray.dir_y = direction.y;
+  rh.ray.dir_z = direction.z;
   rh.ray.tnear = tnear;
   rh.ray.tfar = tfar;
   rh.ray.mask = 0xFFFFFFFFu;
@@ -142,13 +142,16 @@ Hit RayScene::intersect(const Vec3f& origin, const Vec3f& direction, float tnear
   return hit;
 }
 
-bool RayScene::occluded(const Vec3f& origin, const Vec3f& direction, float tnear,
-                        float tfar) const {
+bool RayScene::occluded(const Vec3f& origin, const Vec3f& direction, float tnear, float tfar) const {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRay ray;
-  ray.org_x = origin.x; ray.org_y = origin.y; ray.org_z = origin.z;
-  ray.dir_x = direction.x; ray.dir_y = direction.y; ray.dir_z = direction.z;
+  ray.org_x = origin.x;
+  ray.org_y = origin.y;
+  ray.org_z = origin.z;
+  ray.dir_x = direction.x;
+  ray.dir_y = direction.y;
+  ray.dir_z = direction.z;
   ray.tnear = tnear;
   ray.tfar = tfar;
   ray.mask = 0xFFFFFFFFu;
@@ -159,9 +162,8 @@ bool RayScene::occluded(const Vec3f& origin, const Vec3f& direction, float tnear
   return ray.tfar == -std::numeric_limits<float>::infinity();
 }
 
-void RayScene::intersect_batch(const float* origins, const float* directions, std::size_t n,
-                               float tnear, const float* tfar, float* t_out,
-                               std::uint32_t* prim_out, std::uint32_t* mesh_out,
+void RayScene::intersect_batch(const float* origins, const float* directions, std::size_t n, float tnear,
+                               const float* tfar, float* t_out, std::uint32_t* prim_out, std::uint32_t* mesh_out,
                                float* normal_out, int threads) const {
   require_committed();
   parallel_for_chunks(n, kRayChunk, threads, [&](std::size_t begin, std::size_t end) {
@@ -180,9 +182,8 @@ void RayScene::intersect_batch(const float* origins, const float* directions, st
   });
 }
 
-void RayScene::occluded_batch(const float* origins, const float* directions, std::size_t n,
-                              float tnear, const float* tfar, bool* occluded_out,
-                              int threads) const {
+void RayScene::occluded_batch(const float* origins, const float* directions, std::size_t n, float tnear,
+                              const float* tfar, bool* occluded_out, int threads) const {
   require_committed();
   parallel_for_chunks(n, kRayChunk, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {

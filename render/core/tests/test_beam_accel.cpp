@@ -1,4 +1,4 @@
-// The beam structures against brute force (ptpb.md §8): every beam that passes the gather's exact
+// The beam structures against brute force (DESIGN.md §8): every beam that passes the gather's exact
 // test of §4 is reported, once, in ascending order, and nothing that fails it by more than the
 // documented slack.
 #include <algorithm>
@@ -10,6 +10,7 @@
 #include "check.hpp"
 #include "ptpb/beam_accel.hpp"
 #include "ptpb/beam_geometry.hpp"
+#include "ptpb/gather.hpp"
 #include "ptpb/rng.hpp"
 #include "ptpb/sampling.hpp"
 
@@ -17,10 +18,11 @@ using namespace ptpb;
 
 namespace {
 
-// The gather's acceptance test (render.cpp), parallel guard 0.
+// The gather's acceptance test (gather.hpp), with the structures' near-parallel bound as its guard:
+// below it they report beams untested.
 bool exact_pair(const Vec3d& o, const Vec3d& d, double t_max, const Beam& b, double radius) {
   const ClosestApproach ca = closest_approach(o, d, b.origin, b.direction);
-  return ca.sin2 > 1e-4 && ca.t >= 0 && ca.t <= t_max && ca.s >= 0 && ca.s <= b.length && ca.u < radius;
+  return test_beam_pair(ca, t_max, b.length, radius, 1e-4) == PairTest::Inside;
 }
 
 std::vector<Beam> random_beams(KeyedRng& rng, int count, double extent, double max_length) {
@@ -50,7 +52,10 @@ void check_structures(const std::vector<Beam>& beams, double radius, int rays, s
   Vec3d lo{1e300, 1e300, 1e300}, hi = lo * -1.0;
   for (const Beam& b : beams)
     for (const Vec3d& p : {b.origin, b.origin + b.direction * b.length})
-      for (int a = 0; a < 3; ++a) { lo[a] = std::min(lo[a], p[a]); hi[a] = std::max(hi[a], p[a]); }
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], p[a]);
+        hi[a] = std::max(hi[a], p[a]);
+      }
   const Vec3d centre = (lo + hi) * 0.5;
   const double half_diagonal = 0.5 * length(hi - lo);
   for (auto& accel : accels) {
@@ -60,8 +65,8 @@ void check_structures(const std::vector<Beam>& beams, double radius, int rays, s
   int missing = 0, repeated = 0, loose = 0, unsorted = 0, pairs = 0;
   std::vector<std::uint32_t> cand;
   for (int r = 0; r < rays; ++r) {
-    const Vec3d o = offset + Vec3d{1.2 * rng.next_double() - 0.1, 1.2 * rng.next_double() - 0.1,
-                                   1.2 * rng.next_double() - 0.1};
+    const Vec3d o =
+        offset + Vec3d{1.2 * rng.next_double() - 0.1, 1.2 * rng.next_double() - 0.1, 1.2 * rng.next_double() - 0.1};
     Vec3d d = sample_uniform_sphere(rng.next_double(), rng.next_double());
     if (r % 7 == 0) d = Vec3d{0, 0, r % 2 ? 1.0 : -1.0};  // axis-parallel rays: zero direction components
     const double t_max = 1.5 * rng.next_double();
@@ -87,15 +92,15 @@ void check_structures(const std::vector<Beam>& beams, double radius, int rays, s
         const ClosestApproach ca = closest_approach(o, d, beams[i].origin, beams[i].direction);
         const double range = k < float_tested ? float_margin / ca.sin2 : 1e-6;
         const double across = k < float_tested ? float_margin / std::sqrt(ca.sin2) : 1e-6 * radius;
-        if (ca.sin2 >= 1e-4 && (ca.u > radius + across || ca.t < -range || ca.t > t_max + range ||
-                                ca.s < -range || ca.s > beams[i].length + range))
+        if (ca.sin2 >= 1e-4 && (ca.u > radius + across || ca.t < -range || ca.t > t_max + range || ca.s < -range ||
+                                ca.s > beams[i].length + range))
           ++loose;
       }
     }
   }
   if (missing || repeated || loose)
-    std::fprintf(stderr, "%s: %d missing, %d repeated, %d loose candidates (%d true pairs)\n", what.c_str(),
-                 missing, repeated, loose, pairs);
+    std::fprintf(stderr, "%s: %d missing, %d repeated, %d loose candidates (%d true pairs)\n", what.c_str(), missing,
+                 repeated, loose, pairs);
   CHECK(missing == 0);
   CHECK(repeated == 0);
   CHECK(loose == 0);
@@ -130,14 +135,16 @@ TEST_CASE("queries starting inside a beam's capsule and short queries inside it"
   std::vector<std::uint32_t> cand;
   for (int r = 0; r < 100; ++r) {
     const Vec3d d = sample_uniform_sphere(rng.next_double(), rng.next_double());
-    const Vec3d o = Vec3d{0.5, 0.5, 0.5} + sample_uniform_sphere(rng.next_double(), rng.next_double()) * (0.01 * rng.next_double());
+    const Vec3d o =
+        Vec3d{0.5, 0.5, 0.5} + sample_uniform_sphere(rng.next_double(), rng.next_double()) * (0.01 * rng.next_double());
     const double t_max = r % 2 ? 0.02 : 0.3;
     for (BeamAccel* a : {accel.get(), grid.get()}) {
       cand.clear();
       a->query(o, d, t_max, cand);
       std::sort(cand.begin(), cand.end());
       for (std::size_t i = 0; i < beams.size(); ++i)
-        if (exact_pair(o, d, t_max, beams[i], radius)) CHECK(std::binary_search(cand.begin(), cand.end(), std::uint32_t(i)));
+        if (exact_pair(o, d, t_max, beams[i], radius))
+          CHECK(std::binary_search(cand.begin(), cand.end(), std::uint32_t(i)));
     }
   }
 }
@@ -168,7 +175,7 @@ TEST_CASE("degenerate beams: identical, zero length, axis-aligned, far from the 
 
 TEST_CASE("automatic dicing: a few R, but about two pieces a beam at most") {
   KeyedRng rng(31, 0, StreamDomain::Test, 6);
-  // Long beams at a small R (the cube of ptpb.md §10 test 4): 6R would cut each into ~13 pieces.
+  // Long beams at a small R (the cube of DESIGN.md §10 test 4): 6R would cut each into ~13 pieces.
   std::vector<Beam> beams = random_beams(rng, 2000, 1.0, 1.6);  // mean length 0.8 m
   auto accel = make_beam_accel(AccelKind::Embree, 32, 0.0);
   accel->build(beams, 0.01, 2);

@@ -1,5 +1,5 @@
 // Unit tests of the PTPB core math: keyed RNG, HG phase, Fresnel, kernels, schedules,
-// closest approach and unit conversions (ptpb.md §10, core-level list).
+// closest approach and unit conversions (DESIGN.md §10, core-level list).
 #include <cmath>
 #include <vector>
 
@@ -136,7 +136,7 @@ TEST_CASE("every kernel integrates to 1 within 1e-6") {
   }
 }
 
-TEST_CASE("schedule gamma_i matches the table of ptpb.md §6") {
+TEST_CASE("schedule gamma_i matches the table of DESIGN.md §6") {
   const int idx[5] = {1, 10, 100, 1000, 10000};
   const double table[3][5] = {{0.833333, 0.493106, 0.237602, 0.110724, 0.051414},
                               {0.900000, 0.659878, 0.426249, 0.269619, 0.170161},
@@ -170,7 +170,11 @@ TEST_CASE("closest approach against brute-force minimisation") {
         for (int j = -10; j <= 10; ++j) {
           const double t = ct + span * i / 10, s = cs + span * j / 10;
           const double dist = length((xc + wc * t) - (xb + wb * s));
-          if (dist < best) { best = dist; bt = t; bs = s; }
+          if (dist < best) {
+            best = dist;
+            bt = t;
+            bs = s;
+          }
         }
       span *= 0.3;
     }

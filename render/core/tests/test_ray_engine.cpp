@@ -57,10 +57,8 @@ TEST_CASE("batched queries agree with single queries at any thread count") {
   }
   std::vector<float> t1(n), t2(n), n1(3 * n), n2(3 * n);
   std::vector<std::uint32_t> p1(n), p2(n), m1(n), m2(n);
-  scene.intersect_batch(o.data(), d.data(), n, 0.0f, nullptr, t1.data(), p1.data(), m1.data(),
-                        n1.data(), 1);
-  scene.intersect_batch(o.data(), d.data(), n, 0.0f, nullptr, t2.data(), p2.data(), m2.data(),
-                        n2.data(), 4);
+  scene.intersect_batch(o.data(), d.data(), n, 0.0f, nullptr, t1.data(), p1.data(), m1.data(), n1.data(), 1);
+  scene.intersect_batch(o.data(), d.data(), n, 0.0f, nullptr, t2.data(), p2.data(), m2.data(), n2.data(), 4);
   bool same = true;
   for (std::size_t i = 0; i < n; ++i) same = same && t1[i] == t2[i] && p1[i] == p2[i];
   CHECK(same);

@@ -1,4 +1,4 @@
-// Tests of the surface photon estimator (ptpb.md §7): the 2-D disk kernels through the gather's
+// Tests of the surface photon estimator (DESIGN.md §7): the 2-D disk kernels through the gather's
 // weight, the density of a synthetic uniform photon field, the hash grid against brute force,
 // the surface schedule of §6 reaching the grid, and a rendered diffuse plane under the sun.
 #include <algorithm>
@@ -135,8 +135,8 @@ TEST_CASE("a gather on a uniform photon field returns its flux density") {
       }
     const double mean = sum / points;
     std::printf("uniform field (%s): mean %.5f vs %.5f (%.3f%%), sigma of one gather %.3f%%, worst %.2f sigma\n",
-                k == SpatialKernel::Box ? "box" : "epanechnikov", mean, E, 100.0 * (mean / E - 1.0),
-                100.0 * sigma / E, worst);
+                k == SpatialKernel::Box ? "box" : "epanechnikov", mean, E, 100.0 * (mean / E - 1.0), 100.0 * sigma / E,
+                worst);
     CHECK(worst < 4.5);
     CHECK_NEAR(mean, E, 4.0 * sigma / std::sqrt(double(points)));
   }
@@ -188,8 +188,8 @@ TEST_CASE("the surface schedule of §6 reaches the photon grid in every mode") {
   sc.film.bin_width_opl = 0.01;
   sc.film.mode = FrameMode::Gate;  // alpha = 4/7: gamma_10 = 0.397352, r and T shrink by its cube root
   RenderResult r = render(sc, s);
-  CHECK_CLOSE(r.stats.final_surface_radius, s.initial_surface_radius * std::cbrt(0.397352), 1e-5);
-  CHECK_CLOSE(r.stats.final_surface_time_half_width, s.initial_time_half_width * std::cbrt(0.397352), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_radius, *s.initial_surface_radius * std::cbrt(0.397352), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_time_half_width, *s.initial_time_half_width * std::cbrt(0.397352), 1e-5);
   CHECK(r.stats.surface_photons > 0);
   CHECK(r.stats.surface_pairs > 0);
   s.initial_surface_time_half_width = 0.02;
@@ -197,12 +197,12 @@ TEST_CASE("the surface schedule of §6 reaches the photon grid in every mode") {
   CHECK_CLOSE(r.stats.final_surface_time_half_width, 0.02 * std::cbrt(0.397352), 1e-5);
   sc.film.mode = FrameMode::Bins;  // alpha = 2/3: gamma_10 = 0.493106, r shrinks by its square root
   r = render(sc, s);
-  CHECK_CLOSE(r.stats.final_surface_radius, s.initial_surface_radius * std::sqrt(0.493106), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_radius, *s.initial_surface_radius * std::sqrt(0.493106), 1e-5);
   CHECK_CLOSE(r.stats.final_surface_time_half_width, 0.02, 1e-12);
   sc.film.mode = FrameMode::Steady;
   s.surface_alpha = 0.8;  // explicit: gamma_10 = 0.659878
   r = render(sc, s);
-  CHECK_CLOSE(r.stats.final_surface_radius, s.initial_surface_radius * std::sqrt(0.659878), 1e-5);
+  CHECK_CLOSE(r.stats.final_surface_radius, *s.initial_surface_radius * std::sqrt(0.659878), 1e-5);
 }
 
 TEST_CASE("a sunlit diffuse plane renders E cos(theta) rho / pi; max_depth 1 leaves it black") {
@@ -214,7 +214,8 @@ TEST_CASE("a sunlit diffuse plane renders E cos(theta) rho / pi; max_depth 1 lea
     double mean = 0.0;
     for (float v : r.steady) mean += v;
     mean /= double(r.steady.size());
-    std::printf("sunlit plane at %.0f deg: %.5f vs %.5f (%.2f%%)\n", deg, mean, expected, 100.0 * (mean / expected - 1.0));
+    std::printf("sunlit plane at %.0f deg: %.5f vs %.5f (%.2f%%)\n", deg, mean, expected,
+                100.0 * (mean / expected - 1.0));
     CHECK_CLOSE(mean, expected, 0.03);
   }
   RenderSettings s = plane_settings();

@@ -1,4 +1,4 @@
-// Acceleration structures for ray–beam queries (ptpb.md §8), rebuilt every iteration: a uniform
+// Acceleration structures for ray–beam queries (DESIGN.md §8), rebuilt every iteration: a uniform
 // grid of diced beam pieces (SmallUPBP style) and a 4-wide BVH over the same pieces (Embree's BVH
 // builder, our traversal). Both run the exact closest-approach test themselves and return each beam
 // that can pass it once; the caller still sorts, deduplicates and runs its own exact test.

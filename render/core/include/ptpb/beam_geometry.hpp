@@ -1,4 +1,4 @@
-// Closest approach between a query ray and a photon beam (ptpb.md §4).
+// Closest approach between a query ray and a photon beam (DESIGN.md §4).
 #pragma once
 #include <cmath>
 
@@ -7,10 +7,10 @@
 namespace ptpb {
 
 struct ClosestApproach {
-  double t = 0.0;       // query-ray parameter of the closest point, m
-  double s = 0.0;       // beam parameter of the closest point, m
-  double u = 0.0;       // distance between the two lines, m
-  double sin2 = 0.0;    // sin^2 of the angle between the directions
+  double t = 0.0;     // query-ray parameter of the closest point, m
+  double s = 0.0;     // beam parameter of the closest point, m
+  double u = 0.0;     // distance between the two lines, m
+  double sin2 = 0.0;  // sin^2 of the angle between the directions
 };
 
 // The closest approach before its divisions: t = t_num / sin2, s = s_num / sin2 and
@@ -35,8 +35,7 @@ inline ApproachNumerators closest_approach_numerators(const Vec3d& xc, const Vec
 }
 
 // Unit directions; returns the infinite-line closest approach (sin2 == 0 means parallel).
-inline ClosestApproach closest_approach(const Vec3d& xc, const Vec3d& wc, const Vec3d& xb,
-                                        const Vec3d& wb) {
+inline ClosestApproach closest_approach(const Vec3d& xc, const Vec3d& wc, const Vec3d& xb, const Vec3d& wb) {
   ClosestApproach r;
   const ApproachNumerators n = closest_approach_numerators(xc, wc, xb, wb);
   r.sin2 = n.sin2;

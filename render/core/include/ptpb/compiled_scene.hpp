@@ -15,8 +15,8 @@ struct SurfaceHit {
   bool valid = false;
   double t = 0.0;
   Vec3d position{};
-  Vec3d normal{};        // outward (winding) normal
-  bool entering = false; // ray travels against the outward normal
+  Vec3d normal{};         // outward (winding) normal
+  bool entering = false;  // ray travels against the outward normal
   std::uint32_t shape = 0;
   int medium_before = kVacuum;  // medium on the side the ray comes from
   int medium_after = kVacuum;   // medium on the far side
@@ -39,7 +39,7 @@ class CompiledScene {
   bool scattering(int medium) const { return medium != kVacuum && has_scattering_[medium]; }
   bool attenuating(int medium) const { return medium != kVacuum && has_extinction_[medium]; }
 
-  // Starts one light path: picks a light by power and samples its emission (ptpb.md §3).
+  // Starts one light path: picks a light by power and samples its emission (DESIGN.md §3).
   bool sample_emission(KeyedRng& rng, LightSample& out) const;
   double total_light_power() const { return total_power_; }
   double ray_epsilon() const { return ray_epsilon_; }
@@ -51,7 +51,11 @@ class CompiledScene {
   RayScene rays_;
   std::vector<char> has_scattering_, has_extinction_;
   // Light table: kind 0 point, 1 area shape, 2 directional, 3 constant sky; cdf over mean-channel power.
-  struct LightEntry { int kind; std::size_t index; double power; };
+  struct LightEntry {
+    int kind;
+    std::size_t index;
+    double power;
+  };
   std::vector<LightEntry> lights_;
   std::vector<double> light_cdf_;
   double total_power_ = 0.0;

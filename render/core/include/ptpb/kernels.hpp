@@ -1,4 +1,4 @@
-// Normalised density-estimation kernels and the progressive bandwidth schedule (ptpb.md §4–§7).
+// Normalised density-estimation kernels and the progressive bandwidth schedule (DESIGN.md §4–§7).
 #pragma once
 #include <cmath>
 #include <stdexcept>
@@ -46,8 +46,7 @@ inline double schedule_gamma(long iteration, double alpha) {
   if (iteration < 0) throw std::invalid_argument("schedule_gamma: iteration must be >= 0");
   if (!(alpha > 0.0 && alpha <= 1.0)) throw std::invalid_argument("alpha must lie in (0, 1]");
   // lgamma closed form keeps large i exact to ~1e-13 without a product over i terms.
-  return std::exp(std::lgamma(iteration + 1.0 + alpha) - std::lgamma(1.0 + alpha) -
-                  std::lgamma(iteration + 2.0));
+  return std::exp(std::lgamma(iteration + 1.0 + alpha) - std::lgamma(1.0 + alpha) - std::lgamma(iteration + 2.0));
 }
 
 }  // namespace ptpb

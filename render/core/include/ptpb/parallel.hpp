@@ -27,8 +27,8 @@ void parallel_for_chunks(std::size_t n, std::size_t chunk, int threads, Body&& b
   if (n == 0) return;
   chunk = std::max<std::size_t>(chunk, 1);
   const std::size_t chunk_count = (n + chunk - 1) / chunk;
-  const int worker_count = static_cast<int>(
-      std::min<std::size_t>(static_cast<std::size_t>(resolve_thread_count(threads)), chunk_count));
+  const int worker_count =
+      static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(resolve_thread_count(threads)), chunk_count));
   std::atomic<std::size_t> next{0};
   std::atomic<bool> failed{false};
   std::exception_ptr error;

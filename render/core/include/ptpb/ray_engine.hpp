@@ -14,9 +14,9 @@ constexpr std::uint32_t kInvalidId = std::numeric_limits<std::uint32_t>::max();
 
 struct Hit {
   float t = std::numeric_limits<float>::infinity();  // distance along the (unit) direction, m
-  std::uint32_t prim_id = kInvalidId;                 // triangle index within its mesh
-  std::uint32_t mesh_id = kInvalidId;                 // caller's id of the mesh
-  Vec3f normal{};                                     // geometric normal, unit, from the winding
+  std::uint32_t prim_id = kInvalidId;                // triangle index within its mesh
+  std::uint32_t mesh_id = kInvalidId;                // caller's id of the mesh
+  Vec3f normal{};                                    // geometric normal, unit, from the winding
   bool valid() const { return mesh_id != kInvalidId; }
 };
 
@@ -38,8 +38,8 @@ class RayScene {
 
   // vertices: nv x 3 floats (m); faces: nf x 3 vertex indices. Throws std::invalid_argument on
   // empty meshes, non-finite vertices or out-of-range indices. Returns the mesh's slot.
-  void add_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
-                std::size_t face_count, std::uint32_t mesh_id);
+  void add_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces, std::size_t face_count,
+                std::uint32_t mesh_id);
   void commit();
   bool committed() const { return committed_; }
 
@@ -54,11 +54,11 @@ class RayScene {
                 float tfar = std::numeric_limits<float>::infinity()) const;
 
   // Batched queries over n rays stored as n x 3 arrays; `threads` = 0 uses all hardware threads.
-  void intersect_batch(const float* origins, const float* directions, std::size_t n, float tnear,
-                       const float* tfar, float* t_out, std::uint32_t* prim_out,
-                       std::uint32_t* mesh_out, float* normal_out, int threads) const;
-  void occluded_batch(const float* origins, const float* directions, std::size_t n, float tnear,
-                      const float* tfar, bool* occluded_out, int threads) const;
+  void intersect_batch(const float* origins, const float* directions, std::size_t n, float tnear, const float* tfar,
+                       float* t_out, std::uint32_t* prim_out, std::uint32_t* mesh_out, float* normal_out,
+                       int threads) const;
+  void occluded_batch(const float* origins, const float* directions, std::size_t n, float tnear, const float* tfar,
+                      bool* occluded_out, int threads) const;
 
  private:
   void require_committed() const;

@@ -1,5 +1,5 @@
 // Keyed counter-based random streams: every stream is a pure function of (seed, iteration,
-// domain, index), so results never depend on threads or on the order of work (ptpb.md §9).
+// domain, index), so results never depend on threads or on the order of work (DESIGN.md §9).
 #pragma once
 #include <cstdint>
 

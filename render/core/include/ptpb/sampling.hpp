@@ -1,4 +1,4 @@
-// Direction warps, the Henyey–Greenstein phase function and dielectric Fresnel (ptpb.md §3).
+// Direction warps, the Henyey–Greenstein phase function and dielectric Fresnel (DESIGN.md §3).
 #pragma once
 #include <algorithm>
 #include <cmath>

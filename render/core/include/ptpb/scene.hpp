@@ -29,8 +29,8 @@ enum class SurfaceKind {
 // Closed (or open, for emitters) triangle mesh. The CCW winding gives the outward normal;
 // `interior`/`exterior` are medium ids on the two sides (kVacuum for none).
 struct Shape {
-  std::vector<float> vertices;      // N x 3
-  std::vector<std::uint32_t> faces; // M x 3
+  std::vector<float> vertices;       // N x 3
+  std::vector<std::uint32_t> faces;  // M x 3
   SurfaceKind kind = SurfaceKind::Null;
   int interior = kVacuum;
   int exterior = kVacuum;
@@ -45,7 +45,7 @@ struct PointLight {
   int medium = kVacuum;
 };
 
-// Plane wave from direction `to_sun`; the time origin is the plane Pi_0 of ptpb.md §1.
+// Plane wave from direction `to_sun`; the time origin is the plane Pi_0 of DESIGN.md §1.
 struct DirectionalLight {
   Vec3d to_sun{0, 0, 1};
   Vec3d irradiance{0, 0, 0};  // W/m^2 on a plane perpendicular to to_sun
@@ -67,7 +67,7 @@ enum class FrameMode { Steady, Bins, Gate };
 struct Film {
   FrameMode mode = FrameMode::Steady;
   int temporal_bins = 0;
-  double start_opl = 0.0;      // m
+  double start_opl = 0.0;        // m
   double bin_width_opl = 0.003;  // m
 };
 

@@ -1,4 +1,4 @@
-// Surface photons and their density estimate on diffuse surfaces (ptpb.md §7): the record a
+// Surface photons and their density estimate on diffuse surfaces (DESIGN.md §7): the record a
 // light path leaves at each diffuse hit, a uniform hash grid rebuilt every iteration with the
 // iteration's radius r_i, and the per-photon acceptance and kernel weight of the gather.
 #pragma once
@@ -11,11 +11,11 @@
 namespace ptpb {
 
 struct SurfacePhoton {
-  Vec3d position{};       // x_p on the surface
-  Vec3d direction{};      // unit incident direction, along the light's travel
-  Vec3d normal{};         // unit surface normal on the side the light arrived from
-  Vec3d power{};          // Phi_p: path throughput on arrival, before the albedo, W
-  double tau = 0.0;       // arrival OPL tau_p, m (from the light's time origin)
+  Vec3d position{};   // x_p on the surface
+  Vec3d direction{};  // unit incident direction, along the light's travel
+  Vec3d normal{};     // unit surface normal on the side the light arrived from
+  Vec3d power{};      // Phi_p: path throughput on arrival, before the albedo, W
+  double tau = 0.0;   // arrival OPL tau_p, m (from the light's time origin)
   std::uint32_t shape = 0;
   int light_depth = 0;    // non-null interactions before the hit
   bool timeless = false;  // from an emitter without a time origin: steady image only

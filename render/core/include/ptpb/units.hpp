@@ -3,7 +3,7 @@
 
 namespace ptpb {
 
-constexpr double kSpeedOfLight = 299792458.0;                // m/s, exact
+constexpr double kSpeedOfLight = 299792458.0;                     // m/s, exact
 constexpr double kPicosecondsPerMetreOpl = 1e12 / kSpeedOfLight;  // 3335.640952 ps per metre of OPL
 
 inline double opl_to_seconds(double opl_m) { return opl_m / kSpeedOfLight; }

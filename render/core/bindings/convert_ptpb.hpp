@@ -1,0 +1,36 @@
+// Conversions between the Python dicts of render/ptpb.py and the core's structs (convert_ptpb.cpp).
+// Each raises std::invalid_argument (ValueError in Python) naming the key that is wrong.
+#pragma once
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <vector>
+
+#include "ptpb/render.hpp"
+#include "ptpb/scene.hpp"
+#include "ptpb/settings.hpp"
+
+namespace ptpb_bindings {
+
+namespace py = pybind11;
+
+ptpb::Scene parse_scene(const py::dict& d);
+ptpb::RenderSettings parse_settings(const py::dict& d);
+
+// The counters and timings a result's "stats" dict and a checkpoint state carry.
+py::dict stats_dict(const ptpb::RenderStats& s);
+// A result's "stats": stats_dict, whether the run was cancelled or interrupted (Ctrl-C), the
+// fractions of the energy before and after the frame window, and the resolved schedule (alpha,
+// surface_alpha, initial_beam_radius_m, initial_time_half_width_m, initial_surface_radius_m,
+// initial_surface_time_half_width_m).
+py::dict result_stats_dict(const ptpb::RenderStats& s, bool interrupted);
+
+// The checkpoint dict: the state's sums copied out (steady, early, late float64; frames and their
+// remainders float32) as arrays the callback may keep; and back (refusing other precisions).
+py::dict state_dict(const ptpb::RenderState& st);
+ptpb::RenderState parse_state(const py::dict& d);
+
+// NumPy array that takes ownership of a vector's buffer (no copy).
+py::array_t<float> owned_array(std::vector<float>&& v, std::vector<py::ssize_t> shape);
+
+}  // namespace ptpb_bindings

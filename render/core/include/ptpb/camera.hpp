@@ -1,0 +1,63 @@
+// The camera pass (DESIGN.md §4, §7): Mitsuba's pinhole camera, and the camera path of one pixel,
+// which gathers beams along its medium segments and surface photons where it ends on a diffuse
+// surface.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "ptpb/beam_accel.hpp"
+#include "ptpb/beams.hpp"
+#include "ptpb/compiled_scene.hpp"
+#include "ptpb/film.hpp"
+#include "ptpb/render.hpp"
+#include "ptpb/settings.hpp"
+#include "ptpb/surface_photons.hpp"
+
+namespace ptpb {
+
+// Mitsuba's look_at frame, columns (left, up, forward), and the tangents of the half field of view.
+struct CameraFrame {
+  Vec3d origin, left, up, forward;
+  double tan_x = 0.0, tan_y = 0.0;
+};
+
+CameraFrame make_camera_frame(const Camera& camera);
+
+// Everything one iteration's camera pass needs, read-only.
+struct CameraPass {
+  const CompiledScene* cs;
+  const RenderSettings* st;
+  const std::vector<Beam>* beams;
+  const BeamAccel* accel;
+  const std::vector<SurfacePhoton>* photons;
+  const SurfacePhotonGrid* photon_grid;
+  std::uint64_t iteration;
+  double radius, time_half_width, inv_paths;
+  double surface_radius, surface_time_half_width;
+  CameraFrame camera;
+  double far_length;
+};
+
+// A tile's counts of queries and pairs, added to the render's stats when the tile is done.
+struct TileStats {
+  std::uint64_t queries = 0, candidates = 0, pairs = 0, parallel = 0, false_positives = 0;
+  std::uint64_t surface_queries = 0, surface_pairs = 0;
+
+  // Integer totals: the order in which tiles add them does not matter.
+  void add_to(RenderStats& s) const {
+    s.queries += queries;
+    s.candidates += candidates;
+    s.pair_evaluations += pairs;
+    s.parallel_rejected += parallel;
+    s.false_positives += false_positives;
+    s.surface_queries += surface_queries;
+    s.surface_pairs += surface_pairs;
+  }
+};
+
+// Traces the camera path of pixel (px, py) and splats its estimates into `tile`; `cand` is the
+// caller's scratch space for candidate indices.
+void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std::vector<std::uint32_t>& cand,
+                       TileStats& ts);
+
+}  // namespace ptpb

@@ -1,0 +1,36 @@
+// Free flights in homogeneous media and Russian roulette (DESIGN.md §3), shared by light and camera
+// tracing.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "ptpb/vec.hpp"
+
+namespace ptpb {
+
+// Russian roulette keeps a path with probability min(kMaxSurvival, throughput ratio) on both
+// sides, as Mitsuba's volpath does: a lossless medium (albedo 1) or total internal reflection
+// would otherwise keep q = 1 and a path alive without bound.
+constexpr double kMaxSurvival = 0.95;
+
+// Exponential free-flight helpers shared by light and camera tracing (channel-average mixture).
+inline double survival_mixture(const Vec3d& sigma_t, double s) {
+  return (std::exp(-sigma_t.x * s) + std::exp(-sigma_t.y * s) + std::exp(-sigma_t.z * s)) / 3.0;
+}
+inline double pdf_mixture(const Vec3d& sigma_t, double s) {
+  return (sigma_t.x * std::exp(-sigma_t.x * s) + sigma_t.y * std::exp(-sigma_t.y * s) +
+          sigma_t.z * std::exp(-sigma_t.z * s)) /
+         3.0;
+}
+inline Vec3d transmittance(const Vec3d& sigma_t, double s) {
+  return {std::exp(-sigma_t.x * s), std::exp(-sigma_t.y * s), std::exp(-sigma_t.z * s)};
+}
+// Distance at which the largest channel transmittance reaches `cutoff`.
+inline double cutoff_distance(const Vec3d& sigma_t, double cutoff) {
+  const double smallest = std::min(sigma_t.x, std::min(sigma_t.y, sigma_t.z));
+  if (!(smallest > 0.0) || !(cutoff > 0.0)) return std::numeric_limits<double>::infinity();
+  return -std::log(cutoff) / smallest;
+}
+
+}  // namespace ptpb

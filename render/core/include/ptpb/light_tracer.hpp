@@ -1,0 +1,31 @@
+// The light tracer (DESIGN.md §3, §7): light paths from emission to their last bounce, leaving photon
+// beams in media and surface photons on diffuse surfaces.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "ptpb/beams.hpp"
+#include "ptpb/compiled_scene.hpp"
+#include "ptpb/settings.hpp"
+#include "ptpb/surface_photons.hpp"
+
+namespace ptpb {
+
+// What light paths leave behind: beams (medium segments) and surface photons (diffuse hits).
+struct LightRecords {
+  std::vector<Beam> beams;
+  std::vector<SurfacePhoton> photons;
+};
+
+// Traces light path `path_index` of iteration `iteration` and appends its beams and surface
+// photons, each in the order the path made them.
+void trace_light_path(const CompiledScene& scene, const RenderSettings& settings, std::uint64_t iteration,
+                      std::uint64_t path_index, LightRecords& out);
+
+// Traces the settings.light_paths_per_iteration paths of one iteration into `beams` and `photons`
+// (cleared first), in path order whatever the thread count (§9). The vectors keep their capacity
+// from one iteration to the next.
+void trace_light_paths(const CompiledScene& scene, const RenderSettings& settings, std::uint64_t iteration,
+                       std::vector<Beam>& beams, std::vector<SurfacePhoton>& photons);
+
+}  // namespace ptpb

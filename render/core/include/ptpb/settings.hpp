@@ -1,0 +1,55 @@
+// What render() takes besides the scene: the settings of a progressive render and their enums.
+#pragma once
+#include <cstdint>
+#include <optional>
+
+#include "ptpb/kernels.hpp"
+
+namespace ptpb {
+
+enum class BeamKind { Long, Short };
+enum class AccelKind { Grid, Embree };
+
+struct RenderSettings {
+  int iterations = 16;                              // upper bound on iterations
+  double time_budget_s = 0.0;                       // wall-clock budget; > 0 stops after the iteration in flight
+  std::uint64_t light_paths_per_iteration = 10000;  // M
+  // The bandwidth schedule (§6). Unset values take the defaults resolve_schedule (schedule.hpp)
+  // gives them, which a render reports in RenderStats::schedule.
+  std::optional<double> alpha;                    // kernel-volume schedule parameter; unset: 4/5, 2/3 in gate
+  double initial_beam_radius = 0.01;              // R_0, m
+  std::optional<double> initial_time_half_width;  // T_0, m of OPL (gate mode); unset: R_0
+  // Surface photons (§7) run their own schedule (§6): disk radius r_0 and, in gate mode, T_0.
+  std::optional<double> initial_surface_radius;           // r_0, m; unset: R_0
+  std::optional<double> initial_surface_time_half_width;  // m of OPL; unset: the beams' T_0
+  std::optional<double> surface_alpha;  // unset: 2/3 in bins/steady, 4/7 in gate (alpha* for d = 2, 3)
+  double surface_normal_cos = 0.9;      // photons whose normal is further than acos(this) from x's are rejected
+  SpatialKernel spatial_kernel = SpatialKernel::Epanechnikov;
+  TemporalKernel temporal_kernel = TemporalKernel::Epanechnikov;
+  BeamKind photon_beam_kind = BeamKind::Long;
+  BeamKind query_beam_kind = BeamKind::Long;
+  double parallel_guard_sin2 = 1e-5;
+  int max_depth = -1;  // Mitsuba meaning; -1 unbounded
+  int rr_depth = 5;
+  std::uint64_t seed = 0;
+  int threads = 0;  // 0: all hardware threads
+  AccelKind accel = AccelKind::Embree;
+  int grid_resolution = 32;  // cells along the longest axis (grid only)
+  double dice_length = 0.0;  // beam piece length for the BVH/grid, m; 0 = automatic
+  bool jitter = true;        // false: pixel-centre rays (analytic tests)
+  bool camera_unwarp = false;
+  double transmittance_cutoff = 1e-4;  // long beams/queries end where max-channel Tr drops below
+  int tile_size = 16;
+  int snapshot_every = 0;  // > 0: keep the steady average every k iterations
+  // Checkpoints (§9): hand the accumulated state to the checkpoint callback every k iterations
+  // and/or after this much wall time since the last one; 0 = never.
+  int checkpoint_every_iterations = 0;
+  double checkpoint_every_s = 0.0;
+  // render() refuses a film whose buffers (render_memory_bytes) exceed this many GiB; 0 = no limit.
+  double memory_budget_gib = 8.0;
+  // From this iteration on the float32 frame sums carry their rounding remainders (RenderState).
+  // Not a user setting (the bindings keep the default); tests lower it to reach that code.
+  int compensated_sums_from = 10000;
+};
+
+}  // namespace ptpb

@@ -1,0 +1,128 @@
+// The camera pass (DESIGN.md §4, §7): the pinhole frame and one pixel's camera path, which gathers
+// beams along its medium segments, follows specular surfaces and ends on diffuse ones.
+#include "ptpb/camera.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "ptpb/free_flight.hpp"
+#include "ptpb/gather.hpp"
+#include "ptpb/rng.hpp"
+#include "ptpb/sampling.hpp"
+
+namespace ptpb {
+
+CameraFrame make_camera_frame(const Camera& cam) {
+  CameraFrame f;
+  // Mitsuba's look_at frame: columns (left, up, forward).
+  f.forward = normalize(cam.target - cam.origin);
+  f.left = normalize(cross(cam.up, f.forward));
+  f.up = cross(f.forward, f.left);
+  f.origin = cam.origin;
+  const int W = cam.width, H = cam.height;
+  const double aspect = double(W) / H;
+  const double tan_half = std::tan(cam.fov_deg * kPi / 360.0);
+  std::string axis = cam.fov_axis;
+  if (axis == "smaller") axis = W <= H ? "x" : "y";
+  if (axis == "larger") axis = W >= H ? "x" : "y";
+  if (axis == "x")
+    f.tan_x = tan_half;
+  else if (axis == "y")
+    f.tan_x = tan_half * aspect;
+  else
+    f.tan_x = tan_half * aspect / std::sqrt(1.0 + aspect * aspect);
+  f.tan_y = f.tan_x / aspect;
+  return f;
+}
+
+void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std::vector<std::uint32_t>& cand,
+                       TileStats& ts) {
+  const CompiledScene& cs = *p.cs;
+  const Scene& scene = cs.scene();
+  const RenderSettings& st = *p.st;
+  const int W = scene.camera.width, H = scene.camera.height;
+  const std::size_t pixel = std::size_t(py) * W + px;
+  KeyedRng rng(st.seed, p.iteration, StreamDomain::CameraPixel, pixel);
+  const double jx = st.jitter ? rng.next_double() : 0.5, jy = st.jitter ? rng.next_double() : 0.5;
+  const double sx = (px + jx) / W, sy = (py + jy) / H;
+  // Mitsuba's perspective sensor: +x of camera space is "left", film y points down.
+  const CameraFrame& cam = p.camera;
+  Vec3d dir =
+      normalize(cam.left * ((1.0 - 2.0 * sx) * cam.tan_x) + cam.up * ((1.0 - 2.0 * sy) * cam.tan_y) + cam.forward);
+  const PixelSplat splat{scene.film, st.temporal_kernel, tile,
+                         std::size_t(py - tile.y0) * tile.side + std::size_t(px - tile.x0)};
+  Vec3d pos = cam.origin, weight{1, 1, 1};
+  int medium = scene.camera.medium, depth_c = 0;
+  double tau_c = 0.0;
+  for (int guard = 0; guard < 100000; ++guard) {
+    const SurfaceHit hit = cs.intersect(pos, dir);
+    const double dist = hit.valid ? hit.t : std::numeric_limits<double>::infinity();
+    if (cs.scattering(medium)) {
+      const Vec3d sigma_t = scene.media[medium].sigma_t();
+      double t_q;
+      bool stop_inside = false;
+      if (st.query_beam_kind == BeamKind::Long) {
+        t_q = std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff));
+      } else {
+        const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
+        const double ts_sample = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel]
+                                                      : std::numeric_limits<double>::infinity();
+        stop_inside = ts_sample < dist;
+        t_q = std::min(ts_sample, dist);
+      }
+      if (!std::isfinite(t_q)) t_q = p.far_length;
+      if (st.max_depth < 0 || depth_c + 2 <= st.max_depth)
+        gather(p, splat, pos, dir, t_q, medium, weight, tau_c, depth_c, cand, ts);
+      if (stop_inside || !hit.valid) return;
+      weight = weight * transmittance(sigma_t, dist);
+      if (st.query_beam_kind == BeamKind::Short) weight = weight / survival_mixture(sigma_t, dist);
+    } else if (cs.attenuating(medium) && hit.valid) {
+      weight = weight * transmittance(scene.media[medium].sigma_t(), dist);
+    }
+    if (!hit.valid) {
+      // Sky seen directly: no time origin, so it only enters the steady image (§1).
+      if (max_component(scene.environment_radiance) > 0 && (st.max_depth < 0 || depth_c + 1 <= st.max_depth))
+        splat.add(0.0, weight * scene.environment_radiance, true, p.time_half_width);
+      return;
+    }
+    if (!(max_component(weight) > 0)) return;
+    tau_c += cs.ior(medium) * dist;
+    const Shape& shape = scene.shapes[hit.shape];
+    if (shape.is_emitter() && hit.entering && (st.max_depth < 0 || depth_c + 1 <= st.max_depth)) {
+      splat.add(st.camera_unwarp ? 0.0 : tau_c, weight * shape.radiance, false, p.time_half_width);
+    }
+    pos = hit.position;
+    const Vec3d facing = hit.entering ? hit.normal : -hit.normal;
+    if (shape.kind == SurfaceKind::Null) {
+      medium = hit.medium_after;
+      continue;
+    }
+    if (shape.kind == SurfaceKind::Diffuse) {
+      // The camera path ends here (§7); depth d_c + 2 is the shallowest path a photon can close.
+      if (max_component(shape.albedo) > 0 && p.photon_grid->size() > 0 &&
+          (st.max_depth < 0 || depth_c + 2 <= st.max_depth))
+        gather_surface(p, splat, pos, facing, shape.albedo, weight, tau_c, depth_c, cand, ts);
+      return;
+    }
+    ++depth_c;
+    if (st.max_depth >= 0 && depth_c + 1 > st.max_depth) return;
+    const double n_i = cs.ior(medium), n_t = cs.ior(hit.medium_after);
+    const FresnelResult fr = fresnel_dielectric(-dot(dir, facing), n_i, n_t);
+    if (rng.next_double() < fr.reflectance) {
+      dir = normalize(reflect(dir, facing));
+    } else {
+      dir = refract(dir, facing, n_i, n_t, fr.cos_t);
+      weight = weight * ((n_i / n_t) * (n_i / n_t));  // radiance scaling at refraction (§3)
+      medium = hit.medium_after;
+    }
+    if (depth_c >= st.rr_depth) {
+      const double q = std::min(kMaxSurvival, max_component(weight));
+      if (!(rng.next_double() < q)) return;
+      weight = weight / q;
+    }
+  }
+}
+
+}  // namespace ptpb
