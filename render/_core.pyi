@@ -38,9 +38,7 @@ class RayScene:
         tnear: float = 0.0,
         tfar: npt.ArrayLike | None = None,
         threads: int = 0,
-    ) -> tuple[
-        npt.NDArray[np.float32], npt.NDArray[np.uint32], npt.NDArray[np.uint32], npt.NDArray[np.float32]
-    ]:
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32], npt.NDArray[np.uint32], npt.NDArray[np.float32]]:
         """Closest hits of N rays: (t (N,), prim id (N,), mesh id (N,), normal (N, 3)); misses have
         t = inf and ids INVALID_ID. The GIL is released."""
 
@@ -73,7 +71,7 @@ def ptpb_render(
     Returns ``steady`` (H, W, 3), ``frames`` (F, H, W, 3), ``early`` and ``late`` (H, W, 3), all
     float32; ``snapshots`` (a list of (iteration, (H, W, 3) array)); ``snapshot_seconds``; and
     ``stats`` (counters, timings, final bandwidths, cancelled/interrupted, window fractions), which
-    also reports the schedule the core resolved from the settings and its defaults (ptpb.md §6):
+    also reports the schedule the core resolved from the settings and its defaults (render/core/DESIGN.md §6):
     ``alpha`` (unset: 2/3 in gate, 4/5 in bins/steady), ``surface_alpha`` (unset: 4/7 in gate, 2/3
     otherwise), ``initial_beam_radius_m``, ``initial_time_half_width_m`` (unset: R_0),
     ``initial_surface_radius_m`` (unset: R_0) and ``initial_surface_time_half_width_m`` (unset: the

@@ -118,25 +118,7 @@ def render(
     finally:
         if bar is not None:
             bar.close()
-    stats = dict(out["stats"])
-    stats["initial_beam_radius_m"] = core_settings["initial_beam_radius"]
-    stats["initial_time_half_width_m"] = core_settings.get(
-        "initial_time_half_width", core_settings["initial_beam_radius"]
-    )
-    stats["alpha"] = core_settings.get("alpha", 0.8)
-    # The core falls back to the beams' R_0 and T_0, and to the per-mode alpha*, without these keys.
-    stats["initial_surface_radius_m"] = core_settings.get(
-        "initial_surface_radius", core_settings["initial_beam_radius"]
-    )
-    stats["initial_surface_time_half_width_m"] = core_settings.get(
-        "initial_surface_time_half_width", stats["initial_time_half_width_m"]
-    )
-    surface_alpha = core_settings.get("surface_alpha")
-    stats["surface_alpha"] = (
-        surface_alpha
-        if surface_alpha is not None
-        else (4.0 / 7.0 if scene["film"]["frame_mode"] == "gate" else 2.0 / 3.0)
-    )
+    stats = dict(out["stats"])  # with the resolved schedule: alpha, surface_alpha, initial_*_m
     return RenderResult(
         out["steady"],
         out["frames"],

@@ -59,10 +59,17 @@ def _canonical(value: Any) -> Any:
 
 def render_fingerprint(scene: dict, core_settings: dict) -> dict:
     """What a checkpoint must match to be resumed: the scene's digest and the settings that shape an iteration."""
-    scene_json = json.dumps(_canonical(scene), sort_keys=True, separators=(",", ":"))
+    film = scene.get("film", {})
+    # The film's frame mode decides the core's default alpha, so it is named with the settings.
+    scene_json = json.dumps(
+        _canonical({**scene, "film": {k: v for k, v in film.items() if k != "frame_mode"}}),
+        sort_keys=True,
+        separators=(",", ":"),
+    )
+    settings = {k: _canonical(v) for k, v in sorted(core_settings.items()) if k not in RUN_ONLY_SETTINGS}
     return {
         "scene_sha256": hashlib.sha256(scene_json.encode("utf-8")).hexdigest(),
-        "settings": {k: _canonical(v) for k, v in sorted(core_settings.items()) if k not in RUN_ONLY_SETTINGS},
+        "settings": {**settings, "frame_mode": film.get("frame_mode")},
     }
 
 
@@ -72,9 +79,14 @@ def differences(saved: dict, current: dict) -> list[str]:
     if saved.get("scene_sha256") != current["scene_sha256"]:
         found.append("the scene (the scene stage's ptpb_scene.json or its meshes) changed")
     old, new = saved.get("settings", {}), current["settings"]
+
+    def shown(settings: dict, key: str) -> str:
+        # None leaves the value to the core's default for the frame mode (alpha, surface_alpha).
+        return "(unset)" if key not in settings else "(default)" if settings[key] is None else repr(settings[key])
+
     for key in sorted(set(old) | set(new)):
         if old.get(key) != new.get(key):
-            found.append(f"{key} {old.get(key, '(unset)')!r} -> {new.get(key, '(unset)')!r}")
+            found.append(f"{key} {shown(old, key)} -> {shown(new, key)}")
     return found
 
 

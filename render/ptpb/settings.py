@@ -63,12 +63,9 @@ def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
     """Turn a PTPBConfig into the core's settings dict: units resolved to metres (render/core/DESIGN.md §6).
 
     Beams and surface photons (§7) run separate schedules: R_0, T_0, alpha for the beams and
-    r_0, their own T_0 (the same rule with r_0 in place of R_0) and surface_alpha for surfaces."""
+    r_0, their own T_0 (the same rule with r_0 in place of R_0) and surface_alpha for surfaces. An alpha
+    left null goes to the core as None: the core picks the frame mode's default and reports it in stats."""
     film = scene["film"]
-    mode = cfg.frame_mode or film["frame_mode"]
-    alpha = cfg.alpha if cfg.alpha is not None else (2.0 / 3.0 if mode == "gate" else 0.8)
-    # alpha* = 4 / (d + 4): the disk (d = 2) in bins/steady, the disk x time kernel (d = 3) in gate.
-    surface_alpha = cfg.surface_alpha if cfg.surface_alpha is not None else (4.0 / 7.0 if mode == "gate" else 2.0 / 3.0)
     centre, radius = scene_bounding_sphere(scene)
     r0 = _resolve_radius(cfg.initial_beam_radius, scene, centre, radius)
     r0_surface = _resolve_radius(cfg.initial_surface_radius, scene, centre, radius)
@@ -80,12 +77,12 @@ def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
         "iterations": cfg.iterations,
         "time_budget_s": cfg.time_budget_s or 0.0,
         "light_paths_per_iteration": cfg.light_paths_per_iteration,
-        "alpha": alpha,
+        "alpha": cfg.alpha,
         "initial_beam_radius": r0,
         "initial_time_half_width": t0,
         "initial_surface_radius": r0_surface,
         "initial_surface_time_half_width": t0_surface,
-        "surface_alpha": surface_alpha,
+        "surface_alpha": cfg.surface_alpha,
         "surface_normal_cos": cfg.surface_normal_cos,
         "spatial_kernel": cfg.spatial_kernel,
         "temporal_kernel": cfg.temporal_kernel,

@@ -1,4 +1,4 @@
-"""The core owns the schedule's defaults (ptpb.md §6, issue 15): a direct render._core.ptpb_render
+"""The core owns the schedule's defaults (render/core/DESIGN.md §6, issue 15): a direct render._core.ptpb_render
 call without alpha, surface_alpha or the surfaces' bandwidths gets alpha* = 4/(d + 4) for its frame
 mode and the fall-backs to R_0 and T_0, and reports what it used in its stats."""
 
@@ -9,7 +9,7 @@ import math
 import pytest
 
 from render import _core
-from render.shapes import box_mesh, quad_mesh
+from render.scene.shapes import box_mesh, quad_mesh
 
 R0 = 0.03
 ITERATIONS = 3

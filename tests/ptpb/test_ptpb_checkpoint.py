@@ -98,10 +98,10 @@ def test_a_checkpoint_of_other_settings_or_another_scene_is_refused_naming_what_
         checkpoint_dir=checkpoints,
     )
     for cfg, seed, changed in [
-        (config(alpha=0.7), 1, "alpha 0.8 -> 0.7"),
+        (config(alpha=0.7), 1, r"alpha \(default\) -> 0.7"),
         (config(), 2, "seed 1 -> 2"),
         (config(initial_beam_radius=BeamRadius(value=0.02, unit="m")), 1, "initial_beam_radius 0.03 -> 0.02"),
-        (config(frame_mode="gate"), 1, "alpha 0.8 -> 0.6666666666666666"),
+        (config(frame_mode="gate"), 1, "frame_mode 'bins' -> 'gate'"),
     ]:
         with pytest.raises(ValueError, match=f"other settings .*{changed}.*run without --resume"):
             run_render_stage(

@@ -1,4 +1,4 @@
-// Conversions between the Python dicts of render/ptpb.py and the core's structs: scene, settings,
+// Conversions between the Python dicts of render/ptpb/api.py and the core's structs: scene, settings,
 // stats and checkpoint states. Registration lives in register_ptpb.cpp.
 #include "convert_ptpb.hpp"
 

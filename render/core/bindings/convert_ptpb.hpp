@@ -1,4 +1,4 @@
-// Conversions between the Python dicts of render/ptpb.py and the core's structs (convert_ptpb.cpp).
+// Conversions between the Python dicts of render/ptpb/api.py and the core's structs (convert_ptpb.cpp).
 // Each raises std::invalid_argument (ValueError in Python) naming the key that is wrong.
 #pragma once
 #include <pybind11/numpy.h>

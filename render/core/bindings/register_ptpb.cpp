@@ -1,5 +1,5 @@
 // Python bindings of the PTPB renderer: scene and settings come in as plain dicts (built by
-// render/ptpb.py; converted in convert_ptpb.cpp), images go out as NumPy arrays that own the C++
+// render/ptpb/api.py; converted in convert_ptpb.cpp), images go out as NumPy arrays that own the C++
 // buffers.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
