@@ -5,10 +5,8 @@
 // here the node test is one 4-wide slab test, and a leaf runs the exact test on up to 8 pieces, four
 // at a time in float (SSE). Leaves point into the builder's own primitive array, whose slots are
 // overwritten with the pieces' lines after the build: no second copy of the pieces, and the leaf
-// test reads 32 contiguous bytes a piece instead of the beam records. Measured on the benchmark
-// scene (24 iterations, 1 thread, camera pass): double test reading the beams, leaves of 2, 7.6 s;
-// float lines 6.6 s; with the beams in space order (sort_beams_spatially) 6.25 s; four pieces at a
-// time with leaves of 8, 4.9 s; SAH piece cost 1 -> 0.25 of a node test, 4.25 s.
+// test reads 32 contiguous bytes a piece instead of the beam records. Each of these choices was
+// measured on the benchmark scene's camera pass; the figures are in CHANGELOG.md.
 #include <embree3/rtcore.h>
 #include <embree3/rtcore_builder.h>
 
@@ -47,8 +45,8 @@ struct alignas(64) Node4 {
 constexpr std::uintptr_t kLeafTag = 1;
 constexpr std::uintptr_t kLeafCountMask = 0xE;
 constexpr unsigned kMaxLeafPieces = 8;
-// The builder's largest leaf. With the 4-wide float leaf test, 8 beat 4 and 2 by 3 % and 15 %
-// (camera pass); with one double test a piece, 2 had beaten 1, 4 and 8 by 6-15 %.
+// The builder's largest leaf: with the 4-wide float leaf test, 8 measured faster than 4 and 2
+// (CHANGELOG.md).
 constexpr unsigned kLeafSize = 8;
 static_assert(kLeafSize <= kMaxLeafPieces, "a leaf's count must fit its pointer's tag bits");
 // Readable slots past the last piece of a leaf: the 4-wide leaf test reads whole groups of four.
@@ -157,12 +155,10 @@ class BeamBvh final : public BeamAccel {
     const double scale = scene_scale(bounds);
     const double inflate = radius + kBoxMargin * scale;
     // Automatic piece length: a few R (tight boxes), but never so short that a beam has more than
-    // about two pieces on average. Long beams diced at 4R (the cube of DESIGN.md §10 test 4: ~30
-    // pieces a beam at R = 1 cm) made the build cost 85 % of a render and deepened every query;
-    // at half the mean length the same render ran 3.5x faster (build 2.13 -> 0.17 s, camera pass
-    // 1.07 -> 0.60 s). The penitente benchmark's beams are short: there 6R rather than 4R costs
-    // ~3 % of the render time and saves 16 % of the pieces, which bring the peak memory of a render
-    // whose beams dominate it from 1.53x to 1.46x of frames + beams (make bench).
+    // about two pieces on average. Long beams diced at a few R (the cube of DESIGN.md §10 test 4:
+    // tens of pieces a beam at R = 1 cm) let the build dominate a render and deepened every query.
+    // For short beams 6R rather than 4R trades a little render time for fewer pieces, and so less
+    // peak memory when beams dominate it (figures in CHANGELOG.md).
     double dice = dice_length_;
     if (!(dice > 0)) {
       double total_length = 0.0;
@@ -265,8 +261,8 @@ class BeamBvh final : public BeamAccel {
         const auto* piece = reinterpret_cast<const PieceLine*>(item & ~(kLeafTag | kLeafCountMask));
         const int count = int((item & kLeafCountMask) >> 1) + 1;
         // The child box test above has already passed; the pieces' own boxes would pass three in four
-        // times, and testing them cost more than it saved (camera pass 2.4-2.5 s against 2.0-2.3 s
-        // without). So every piece goes to the exact test.
+        // times, and testing them cost more than it saved (measured on the camera pass). So every piece
+        // goes to the exact test.
 #if defined(__SSE2__)
         for (int i = 0; i < count; i += 4) {
           int hits = float_candidates4(fq4, piece + i) & ((1 << std::min(4, count - i)) - 1);
@@ -346,8 +342,8 @@ class BeamBvh final : public BeamAccel {
     }
   }
 
-  // One piece's share of the 4-wide leaf test against one 4-wide node test (SAH): 0.25 beat 1 by
-  // 12 % (camera pass), 0.125 and 0.5 are within noise of it.
+  // One piece's share of the 4-wide leaf test against one 4-wide node test (SAH): 0.25 measured
+  // fastest on the camera pass; 0.125 and 0.5 are within noise of it.
   static constexpr float kPieceTestCost = 0.25f;
   static constexpr int kStackSize = 256;  // > 3 * maximal depth + 1
 
