@@ -132,6 +132,67 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: 
     return {"rows": rows, "error_curves": {k: v for k, v in series.items()}}
 
 
+HEADINGS = {
+    "renderer": "renderer",
+    "quantity": "quantity",
+    "seconds": "time [s]",
+    "iterations_or_spp": "iterations or spp",
+    "relmse": "relMSE vs reference",
+    "rmse": "RMSE vs reference",
+    "mean_r": "mean R",
+    "mean_g": "mean G",
+    "mean_b": "mean B",
+    "peak_memory_mib": "peak memory [MiB]",
+}
+
+
+def _ratio_text(ours: dict[str, Any], reference: dict[str, Any]) -> str:
+    ratios = [ours[c] / reference[c] if reference[c] else float("nan") for c in ("mean_r", "mean_g", "mean_b")]
+    return " / ".join(f"{r:.3f}" for r in ratios)
+
+
+def key_results(rows: list[dict[str, Any]]) -> list[str]:
+    """The comparison in plain sentences with units, for the top of the report."""
+    by = {(r["renderer"].split(" ")[0], r["quantity"].split(" ")[0]): r for r in rows}
+    lines = []
+    ours, ref = by.get(("ours", "steady")), by.get(("Mitsuba", "steady"))
+    if ours and ref:
+        lines.append(
+            f"Our steady image's mean radiance is {_ratio_text(ours, ref)} (R / G / B) of Mitsuba volpath's; "
+            f"relMSE {_fmt(ours['relmse'])}."
+        )
+    ours, ref = by.get(("ours", "frames")), by.get(("mitransient", "frames"))
+    if ours and ref:
+        lines.append(
+            f"Our frames carry {_ratio_text(ours, ref)} (R / G / B) of mitransient's energy, compared as bins; "
+            f"relMSE {_fmt(ours['relmse'])}."
+        )
+    for row in rows:
+        if row["quantity"] == "steady" or row["renderer"] == "mitransient":
+            count = "iterations" if row["renderer"].startswith("ours") else "spp"
+            memory = f", peak memory {row['peak_memory_mib']:.0f} MiB" if row.get("peak_memory_mib") else ""
+            seconds = f"{row['seconds']:.1f} s" if row.get("seconds") is not None else "an unknown time"
+            lines.append(f"{row['renderer']}: {_fmt(row['iterations_or_spp'])} {count} in {seconds}{memory}.")
+    return lines
+
+
+def report_lead(rows: list[dict[str, Any]]) -> str:
+    """HTML for the report's first screen: the key results, then the table with units and a caption."""
+    import html
+
+    items = "".join(f"<li>{html.escape(line)}</li>" for line in key_results(rows))
+    head = "".join(f"<th>{html.escape(HEADINGS[c])}</th>" for c in COLUMNS)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r[c]))}</td>" for c in COLUMNS) + "</tr>" for r in rows)
+    caption = (
+        "Mean radiance in W m⁻² sr⁻¹ (frames: per bin, summed over the frames' mean); relMSE = mean of "
+        "(x − r)² / (r² + 0.01) against Mitsuba volpath (steady) or mitransient (frames); peak memory is the "
+        "resident size of the process that rendered, at its peak."
+    )
+    return (
+        f"<h2>Results</h2><ul>{items}</ul><table><caption>{html.escape(caption)}</caption><tr>{head}</tr>{body}</table>"
+    )
+
+
 def run_compare_stage(
     run_root: Path, ours_dir: Path | None, reference_dir: Path | None, out_dir: Path, stage_names, title: str
 ) -> dict:
@@ -139,5 +200,11 @@ def run_compare_stage(
     from render.output.report import write_report
 
     result = compare_renders(ours_dir, reference_dir, out_dir)
-    write_report(out_dir / "report.html", run_root, [n for n in stage_names if n != "compare"], title)
+    write_report(
+        out_dir / "report.html",
+        run_root,
+        [n for n in stage_names if n != "compare"],
+        title,
+        lead_html=report_lead(result["rows"]),
+    )
     return {"rows": [{k: r[k] for k in ("renderer", "quantity", "seconds", "relmse")} for r in result["rows"]]}

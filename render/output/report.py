@@ -25,6 +25,7 @@ h1 { border-bottom: 2px solid #888; } h2 { margin-top: 2em; border-bottom: 1px s
 figure { display: inline-block; margin: 0.5em; vertical-align: top; max-width: 560px; }
 figure img, figure video { max-width: 560px; max-height: 480px; border: 1px solid #ccc; image-rendering: pixelated; }
 figcaption { font-size: 0.85em; color: #555; }
+caption { caption-side: bottom; font-size: 0.8em; color: #555; text-align: left; }
 table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; }
 td, th { border: 1px solid #bbb; padding: 2px 6px; text-align: right; }
 pre { background: #f5f5f5; padding: 0.5em; overflow-x: auto; font-size: 0.8em; }
@@ -90,11 +91,9 @@ def _section(title: str, folder: Path, report_dir: Path) -> str:
     manifest = folder / "manifest.json"
     if manifest.exists():
         record = json.loads(manifest.read_text())
-        summary = json.dumps(record.get("summary", {}), indent=1, default=str)
         parts.append(
-            f"<p>Finished {html.escape(record.get('started_utc', '?'))} in {record.get('seconds', 0):.1f} s, "
-            f"revision <code>{html.escape(record.get('git_revision', '?'))}</code>.</p>"
-            f"<details><summary>summary</summary><pre>{html.escape(summary)}</pre></details>"
+            f"<p>Started {html.escape(str(record.get('started_utc', '?')))}, took {record.get('seconds', 0):.1f} s, "
+            f"at revision <code>{html.escape(str(record.get('git_revision', '?')))}</code>.</p>"
         )
     rel = lambda p: html.escape(os.path.relpath(p, report_dir))  # noqa: E731
     media = []
@@ -122,8 +121,11 @@ def _section(title: str, folder: Path, report_dir: Path) -> str:
     return "\n".join(parts)
 
 
-def write_report(report_path: Path, run_root: Path, stage_names: Iterable[str], title: str) -> Path:
-    """Write ``report_path`` with one section per finished stage folder under ``run_root``."""
+def write_report(
+    report_path: Path, run_root: Path, stage_names: Iterable[str], title: str, lead_html: str = ""
+) -> Path:
+    """Write ``report_path``: ``lead_html`` first (the key results), then one section per finished stage
+    folder under ``run_root``."""
     report_dir = report_path.parent
     sections = []
     for name in stage_names:
@@ -131,7 +133,7 @@ def write_report(report_path: Path, run_root: Path, stage_names: Iterable[str], 
         if folder.is_dir():
             sections.append(_section(name, folder, report_dir))
     own = _section("this stage", report_dir, report_dir) if report_dir.is_dir() else ""
-    body = "\n".join(s for s in sections + [own] if s)
+    body = "\n".join(s for s in [lead_html] + sections + [own] if s)
     return write_text_atomic(report_path, html_page(title, body))
 
 

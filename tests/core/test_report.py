@@ -67,3 +67,47 @@ def test_report_opens_in_chromium_without_missing_media(tmp_path):
     (tmp_path / "run" / "composite" / "streak_y.png").unlink()
     dom = chromium_dom(report)
     assert re.search(r'data-missing="1"', dom)
+
+
+def test_the_report_opens_with_the_results_in_words_and_shows_no_raw_json(tmp_path):
+    import json
+
+    from render.output.compare import run_compare_stage
+
+    run = tmp_path / "run"
+    ours, ref = run / "render", run / "reference"
+    ours.mkdir(parents=True)
+    ref.mkdir()
+    steady = np.full((4, 6, 3), 2.0, np.float32)
+    frames = np.full((5, 4, 6, 3), 0.4, np.float32)
+    np.save(ours / "steady.npy", steady * np.float32([0.98, 1.0, 1.02]))
+    np.save(ours / "frames.npy", frames / 0.1)  # gate: densities per metre; bins of 0.1 m
+    stats = {
+        "frame_mode": "gate",
+        "start_opl_m": 3.0,
+        "bin_width_opl_m": 0.1,
+        "temporal_bins": 5,
+        "time_total_s": 12.5,
+        "iterations": 64,
+        "peak_memory_mib": 300.0,
+        "accel_references": 123,
+    }
+    (ours / "stats.json").write_text(json.dumps(stats))
+    (ours / "manifest.json").write_text(json.dumps({"summary": {"false_positives": 7}, "seconds": 12.6}))
+    np.save(ref / "steady.npy", steady)
+    np.save(ref / "frames.npy", frames)
+    timing = {
+        "steady": {"seconds": 40.0, "spp": 512},
+        "transient": {"seconds": 50.0, "spp": 256},
+        "film": {"start_opl": 3.0, "bin_width_opl": 0.1, "temporal_bins": 5},
+    }
+    (ref / "timing.json").write_text(json.dumps(timing))
+    run_compare_stage(run, ours, ref, run / "compare", ["reference", "render"], "test run")
+    page = (run / "compare" / "report.html").read_text()
+    results = page.index("<h2>Results</h2>")
+    assert results < page.index("<h2>reference</h2>") < page.index("<h2>render</h2>")
+    assert "mean radiance is 0.980 / 1.000 / 1.020 (R / G / B) of Mitsuba volpath&#x27;s" in page
+    assert "carry 1.000 / 1.000 / 1.000 (R / G / B) of mitransient&#x27;s energy" in page
+    assert "ours (PTPB): 64 iterations in 12.5 s, peak memory 300 MiB." in page
+    assert "time [s]" in page and "W m⁻² sr⁻¹" in page
+    assert "<pre>" not in page and "false_positives" not in page and "accel_references" not in page
