@@ -4,5 +4,14 @@ The public API is re-exported here (``from render.ptpb import render``); the com
 private module ``render._core``."""
 
 from render.ptpb.api import RenderResult, core_inputs, memory_bytes, render, resolve_settings, scene_bounding_sphere
+from render.ptpb.stage import load_core_scene as load_scene
 
-__all__ = ["RenderResult", "core_inputs", "memory_bytes", "render", "resolve_settings", "scene_bounding_sphere"]
+__all__ = [
+    "RenderResult",
+    "core_inputs",
+    "load_scene",
+    "memory_bytes",
+    "render",
+    "resolve_settings",
+    "scene_bounding_sphere",
+]

@@ -20,7 +20,7 @@ channels (no hero wavelength), as in render/core/DESIGN.md §3.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,11 +46,20 @@ class RenderResult:
     snapshot_seconds: list[float] = field(default_factory=list)  # wall time of each snapshot since the start
 
 
-def core_inputs(scene: dict, settings: PTPBConfig | dict, **overrides: Any) -> tuple[dict, dict]:
-    """The scene and settings dicts the core renders: a PTPBConfig resolved to metres (its
-    frame_mode, when set, replacing the film's), a core settings dict as it is; ``overrides``
-    replace core settings keys."""
+def is_core_settings(settings: Mapping[str, Any]) -> bool:
+    """A dict that gives ``initial_beam_radius`` as a number is the core's own settings dict (lengths
+    already in metres); any other dict holds keys of the config's render section."""
+    return isinstance(settings.get("initial_beam_radius"), (int, float))
+
+
+def core_inputs(scene: dict, settings: PTPBConfig | Mapping[str, Any], **overrides: Any) -> tuple[dict, dict]:
+    """The scene and settings dicts the core renders. ``settings`` is a PTPBConfig, or a plain dict of
+    its keys (validated, defaults filled in, e.g. ``{"iterations": 16}``), both resolved to metres with
+    their frame_mode, when set, replacing the film's; or the core's settings dict (see
+    ``is_core_settings``), passed as it is. ``overrides`` replace core settings keys."""
     scene = dict(scene)
+    if not isinstance(settings, PTPBConfig) and not is_core_settings(settings):
+        settings = PTPBConfig.model_validate(dict(settings))
     if isinstance(settings, PTPBConfig):
         core_settings = resolve_settings(scene, settings)
         if settings.frame_mode is not None:
@@ -61,7 +70,7 @@ def core_inputs(scene: dict, settings: PTPBConfig | dict, **overrides: Any) -> t
     return scene, core_settings
 
 
-def memory_bytes(scene: dict, settings: PTPBConfig | dict, *, state_copy: bool = False) -> float:
+def memory_bytes(scene: dict, settings: PTPBConfig | Mapping[str, Any], *, state_copy: bool = False) -> float:
     """Peak bytes of the render's image buffers, the figure render.memory_budget_gib is checked against
     (``state_copy``: with checkpoints or a resume state)."""
     from render import _core
@@ -71,15 +80,17 @@ def memory_bytes(scene: dict, settings: PTPBConfig | dict, *, state_copy: bool =
 
 def render(
     scene: dict,
-    settings: PTPBConfig | dict,
+    settings: PTPBConfig | Mapping[str, Any],
     *,
     progress: bool | Callable[[dict], bool | None] = False,
     resume: dict | None = None,
     checkpoint: Callable[[dict], bool | None] | None = None,
     **overrides: Any,
 ) -> RenderResult:
-    """Render ``scene`` (the core dict above) with ``settings`` (a PTPBConfig, or a core settings
-    dict with R_0/T_0 already in metres). ``overrides`` replace core settings keys (e.g. jitter).
+    """Render ``scene`` (the core dict above; ``load_scene(folder)`` reads one that the scene stage wrote)
+    with ``settings``: a PTPBConfig, a plain dict of its keys with defaults for the rest
+    (``{"iterations": 16, "frame_mode": "bins"}``), or the core's settings dict with R_0/T_0 already
+    in metres (``is_core_settings``). ``overrides`` replace core settings keys (e.g. jitter).
     ``progress=True`` shows a tqdm bar; a callable receives the core's progress dicts.
     Ctrl-C (or a callback returning False) stops once the iteration under way is complete: its tiles
     add straight into the sums, so it is finished rather than dropped; ``stats["interrupted"]`` tells.

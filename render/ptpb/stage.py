@@ -43,8 +43,8 @@ def _load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def load_core_scene(scene_dir: Path) -> dict:
-    """Read ``scene_dir/ptpb_scene.json`` (the core dict of render/ptpb/api.py; shapes may name a
-    ``mesh`` file relative to the folder instead of inline vertices/faces)."""
+    """Read the scene folder that the scene stage wrote (``scene_dir/ptpb_scene.json`` and the meshes
+    it names) as the core's scene dict, ready for ``render``; exported as ``render.ptpb.load_scene``."""
     path = scene_dir / "ptpb_scene.json"
     if not path.exists():
         raise FileNotFoundError(f"{path} not found: the scene stage must write the PTPB scene description there")
