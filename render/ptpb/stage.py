@@ -42,9 +42,10 @@ def _load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"{path}: meshes must be .npz (vertices, faces) or one of {', '.join(MESH_SUFFIXES)}")
 
 
-def load_core_scene(scene_dir: Path) -> dict:
+def load_core_scene(scene_dir: str | Path) -> dict:
     """Read the scene folder that the scene stage wrote (``scene_dir/ptpb_scene.json`` and the meshes
     it names) as the core's scene dict, ready for ``render``; exported as ``render.ptpb.load_scene``."""
+    scene_dir = Path(scene_dir)
     path = scene_dir / "ptpb_scene.json"
     if not path.exists():
         raise FileNotFoundError(f"{path} not found: the scene stage must write the PTPB scene description there")
