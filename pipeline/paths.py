@@ -5,7 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+# In a clone (and an editable install) configs/ sits at the root; a wheel carries it as pipeline/configs.
 CONFIGS_DIR = PROJECT_ROOT / "configs"
+if not CONFIGS_DIR.is_dir():
+    CONFIGS_DIR = Path(__file__).resolve().parent / "configs"
 PRESETS_DIR = CONFIGS_DIR / "presets"
 OPTICS_PRESETS_DIR = PRESETS_DIR / "optics"
 DEFAULT_RUNS_DIR = Path("runs")

@@ -2,7 +2,7 @@
 
 - ``geometry`` never imports ``render``.
 - Domain code (``geometry``, ``render``) imports from ``pipeline`` only its leaf modules: the config
-  schema, atomic writes, paths, units and logging set-up; never the runner, the stage list, the CLI, the
+  schema, atomic writes, paths, units, memory measurement and logging set-up; never the runner, the stage list, the CLI, the
   config loader or the sweep driver.
 - ``render.output`` imports no renderer: neither our core's Python face nor the Mitsuba adapter.
 """
@@ -15,7 +15,14 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PIPELINE_LEAVES = ("pipeline.schema", "pipeline.atomic", "pipeline.paths", "pipeline.units", "pipeline.log")
+PIPELINE_LEAVES = (
+    "pipeline.schema",
+    "pipeline.atomic",
+    "pipeline.paths",
+    "pipeline.units",
+    "pipeline.memory",
+    "pipeline.log",
+)
 RENDERERS = ("render.ptpb", "render.mitsuba", "render._core", "mitsuba", "mitransient", "drjit")
 
 

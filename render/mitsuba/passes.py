@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import logging
-import resource
 import time
 from pathlib import Path
 
 import numpy as np
 
+from pipeline.memory import PeakMemory
 from render.mitsuba.export import disk_sun_opl_shift, scene_to_mitsuba, use_variant
 from render.scene.model import Scene
 
@@ -31,38 +31,39 @@ def _render_passes(
     from tqdm import tqdm
 
     variant = use_variant(variant, transient=transient)
-    mi_scene = mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass, seed=seed))
-    sums: list[np.ndarray] = []
-    done = passes = 0
-    last = 0.0
-    start = time.perf_counter()
-    desc = "mitransient" if transient else "mitsuba"
-    with tqdm(total=None if time_budget_s else spp, unit="spp", desc=desc, leave=False, disable=quiet) as bar:
-        while True:
-            elapsed = time.perf_counter() - start
-            if time_budget_s is None and done >= spp:
-                break
-            # The budget replaces spp (ReferenceConfig): stop before the pass that would overrun it.
-            if time_budget_s is not None and passes and elapsed + last > time_budget_s:
-                break
-            n = spp_per_pass if time_budget_s is not None else min(spp_per_pass, spp - done)
-            t0 = time.perf_counter()
-            # mitsuba.util.pyi types seed as mi.UInt32 (its own default is 0); the binding takes a Python int.
-            result = mi.render(mi_scene, seed=passes, spp=n)  # type: ignore[arg-type]
-            images = [np.array(result[1]), np.array(result[0])] if transient else [np.array(result)]
-            images = [im[..., :3].astype(np.float64) * n for im in images]
-            sums = images if not sums else [a + b for a, b in zip(sums, images)]
-            last = time.perf_counter() - t0
-            done += n
-            passes += 1
-            bar.update(n)
+    with PeakMemory() as memory:  # the reference renderer's own peak (pipeline/memory.py)
+        mi_scene = mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass, seed=seed))
+        sums: list[np.ndarray] = []
+        done = passes = 0
+        last = 0.0
+        start = time.perf_counter()
+        desc = "mitransient" if transient else "mitsuba"
+        with tqdm(total=None if time_budget_s else spp, unit="spp", desc=desc, leave=False, disable=quiet) as bar:
+            while True:
+                elapsed = time.perf_counter() - start
+                if time_budget_s is None and done >= spp:
+                    break
+                # The budget replaces spp (ReferenceConfig): stop before the pass that would overrun it.
+                if time_budget_s is not None and passes and elapsed + last > time_budget_s:
+                    break
+                n = spp_per_pass if time_budget_s is not None else min(spp_per_pass, spp - done)
+                t0 = time.perf_counter()
+                # mitsuba.util.pyi types seed as mi.UInt32 (its own default is 0); the binding takes a Python int.
+                result = mi.render(mi_scene, seed=passes, spp=n)  # type: ignore[arg-type]
+                images = [np.array(result[1]), np.array(result[0])] if transient else [np.array(result)]
+                images = [im[..., :3].astype(np.float64) * n for im in images]
+                sums = images if not sums else [a + b for a, b in zip(sums, images)]
+                last = time.perf_counter() - t0
+                done += n
+                passes += 1
+                bar.update(n)
     timing = {
         "seconds": time.perf_counter() - start,
         "spp": done,
         "passes": passes,
         "spp_per_pass": spp_per_pass,
         "seed": seed,
-        "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        **memory.record(),
         "variant": variant,
         "integrator": "transient_prbvolpath" if transient else "volpath",
     }

@@ -186,7 +186,7 @@ def report_lead(rows: list[dict[str, Any]]) -> str:
     caption = (
         "Mean radiance in W m⁻² sr⁻¹ (frames: per bin, summed over the frames' mean); relMSE = mean of "
         "(x − r)² / (r² + 0.01) against Mitsuba volpath (steady) or mitransient (frames); peak memory is the "
-        "resident size of the process that rendered, at its peak."
+        "resident size of the process while that renderer ran (pipeline/memory.py), Python and libraries included."
     )
     return (
         f"<h2>Results</h2><ul>{items}</ul><table><caption>{html.escape(caption)}</caption><tr>{head}</tr>{body}</table>"

@@ -16,13 +16,13 @@ from __future__ import annotations
 
 import json
 import logging
-import resource
 from pathlib import Path
 
 import numpy as np
 
 from geometry.meshio import MESH_SUFFIXES, read_mesh
 from pipeline.atomic import atomic_path, save_npy_atomic, write_json_atomic
+from pipeline.memory import PeakMemory
 from pipeline.schema.ptpb import PTPBConfig
 from render.output.exr import write_exr
 from render.output.figures import rendered_image
@@ -92,7 +92,8 @@ def run_render_stage(
         log.info("render: checkpoint after %d iterations -> %s", state["stats"]["iterations"], path)
 
     checkpoint = (lambda state: save(state, path)) if path is not None else None
-    result = render(scene, cfg, progress=not quiet, resume=resume, checkpoint=checkpoint)
+    with PeakMemory() as memory:  # this render's own peak, not the whole run's (pipeline/memory.py)
+        result = render(scene, cfg, progress=not quiet, resume=resume, checkpoint=checkpoint)
     if result.stats["interrupted"]:
         done = result.stats["iterations"]
         if path is not None and (cfg.checkpoint_every_iterations or cfg.checkpoint_every_s):
@@ -129,8 +130,7 @@ def run_render_stage(
     film = scene["film"]
     stats = {
         **{k: (v.item() if hasattr(v, "item") else v) for k, v in result.stats.items()},
-        # The process's peak resident memory so far: an upper bound on what this render needed.
-        "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        **memory.record(),
         "frame_mode": cfg.frame_mode or film["frame_mode"],
         "temporal_bins": film.get("temporal_bins", 0),
         "start_opl_m": film.get("start_opl", 0.0),
