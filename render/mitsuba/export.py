@@ -33,7 +33,6 @@ from render.scene.model import Scene, bounding_sphere_of_points
 
 log = logging.getLogger(__name__)
 
-FRAME_UNITS = "W m^-2 sr^-1 per bin"
 DEFAULT_DISK_DISTANCE_RADII = 1000.0
 TRANSIENT_SEED_OFFSET = 1 << 16  # keeps the transient reference's noise independent of the steady one
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +12,15 @@ import OpenImageIO as oiio
 from pipeline.atomic import atomic_path
 
 
-def write_exr(path: str | os.PathLike[str], array: np.ndarray, *, channels: tuple[str, ...] | None = None) -> Path:
-    """Write an (H, W) or (H, W, C) array as a float32 EXR (ZIP compression); RGB(A) names by default."""
+def write_exr(
+    path: str | os.PathLike[str],
+    array: np.ndarray,
+    *,
+    channels: tuple[str, ...] | None = None,
+    attributes: Mapping[str, str | float | int] | None = None,
+) -> Path:
+    """Write an (H, W) or (H, W, C) array as a float32 EXR (ZIP compression); RGB(A) names by default.
+    ``attributes`` go into the header as they are (e.g. ``penitentes:opl_m`` of a transient frame)."""
     image = np.asarray(array, dtype=np.float32)
     if image.ndim == 2:
         image = image[..., None]
@@ -25,6 +33,8 @@ def write_exr(path: str | os.PathLike[str], array: np.ndarray, *, channels: tupl
     spec = oiio.ImageSpec(width, height, nchannels, oiio.FLOAT)
     spec.channelnames = tuple(names)
     spec.attribute("compression", "zip")
+    for name, value in (attributes or {}).items():
+        spec.attribute(name, value)
     with atomic_path(path) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None:

@@ -6,6 +6,10 @@ Both renderers' stages write ``steady.npy`` (H, W, 3) and, when transient, ``fra
 ``bin_width_opl``, ``temporal_bins``, ``frame_mode`` "bins"). ``RenderOutputs.read`` gives either as
 one typed object, and ``FrameAxis.as_bins`` is the only conversion of gate frames (densities per
 metre of OPL at bin centres) to bins (integrals over each bin) in the project.
+
+Beside every ``frames.npy``, both stages write ``frames.json`` (``write_frames``), the one documented
+description of the stack: its layout, frame mode, unit, the time axis (frame centres in metres of OPL
+and in nanoseconds since first light, i.e. since the window opens) and how to convert it to bins.
 """
 
 from __future__ import annotations
@@ -17,10 +21,18 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.atomic import save_npy_atomic, write_json_atomic
+from pipeline.units import NS_PER_M_OPL
+
 OURS_STATS = "stats.json"
 REFERENCE_TIMING = "timing.json"
 STEADY = "steady.npy"
 FRAMES = "frames.npy"
+FRAMES_DESCRIPTION = "frames.json"
+FRAME_UNITS = {
+    "bins": "W m^-2 sr^-1 per bin (the radiance integrated over each bin's OPL)",
+    "gate": "W m^-2 sr^-1 per metre of OPL (the radiance density at each bin's centre)",
+}
 
 
 @dataclass(frozen=True)
@@ -43,6 +55,34 @@ class FrameAxis:
     def in_bins(self) -> FrameAxis:
         """This axis for frames converted by ``as_bins``."""
         return FrameAxis(self.start_opl, self.bin_width_opl, "bins", self.temporal_bins)
+
+    def describe(self, frame_count: int) -> dict[str, Any]:
+        """The time axis of ``frame_count`` frames, for frames.json and EXR metadata."""
+        centres = [self.centre(k) for k in range(frame_count)]
+        return {
+            "frame_mode": self.frame_mode,
+            "unit": FRAME_UNITS.get(self.frame_mode, ""),
+            "start_opl_m": self.start_opl,
+            "bin_width_opl_m": self.bin_width_opl,
+            "temporal_bins": frame_count,
+            "frame_centres_opl_m": centres,
+            "frame_centres_ns_since_first_light": [(c - self.start_opl) * NS_PER_M_OPL for c in centres],
+            "to_bins": "multiply by bin_width_opl_m" if self.frame_mode == "gate" else "already bins",
+        }
+
+
+def write_frames(folder: Path, frames: np.ndarray, axis: FrameAxis, **about: Any) -> None:
+    """Write ``frames.npy`` (T, H, W, 3) float32 and its description ``frames.json`` (``about`` adds
+    entries, e.g. the renderer and whether the camera leg is in the OPL)."""
+    save_npy_atomic(folder / FRAMES, frames)
+    description = {
+        "file": FRAMES,
+        "layout": "(T, H, W, 3) float32, linear RGB, frame k at OPL start_opl_m + (k + 1/2) bin_width_opl_m",
+        "shape": list(frames.shape),
+        **axis.describe(len(frames)),
+        **about,
+    }
+    write_json_atomic(folder / FRAMES_DESCRIPTION, description)
 
 
 @dataclass
@@ -105,4 +145,14 @@ class RenderOutputs:
         return self.axis.as_bins(frames)
 
 
-__all__ = ["FrameAxis", "RenderOutputs", "OURS_STATS", "REFERENCE_TIMING", "STEADY", "FRAMES"]
+__all__ = [
+    "FRAMES",
+    "FRAMES_DESCRIPTION",
+    "FRAME_UNITS",
+    "OURS_STATS",
+    "REFERENCE_TIMING",
+    "STEADY",
+    "FrameAxis",
+    "RenderOutputs",
+    "write_frames",
+]

@@ -26,7 +26,7 @@ from pipeline.memory import PeakMemory
 from pipeline.schema.ptpb import PTPBConfig
 from render.output.exr import write_exr
 from render.output.figures import rendered_image
-from render.output.files import FRAMES, OURS_STATS, STEADY
+from render.output.files import FRAME_UNITS, OURS_STATS, STEADY, FrameAxis, write_frames
 from render.ptpb.api import core_inputs, render
 from render.ptpb.checkpoint import CHECKPOINT_NAME, load_checkpoint, render_fingerprint, save_checkpoint
 
@@ -126,18 +126,18 @@ def run_render_stage(
                     steady=np.stack([im for _, im in result.snapshots]),
                 )
     save_npy_atomic(out_dir / STEADY, result.steady)
-    save_npy_atomic(out_dir / FRAMES, result.frames)
     film = scene["film"]
+    frame_mode = cfg.frame_mode or film["frame_mode"]
+    axis = FrameAxis(film.get("start_opl", 0.0), film.get("bin_width_opl", 0.003), frame_mode, len(result.frames))
+    write_frames(out_dir, result.frames, axis, renderer="ours (PTPB)", camera_leg_included=not cfg.camera_unwarp)
     stats = {
         **{k: (v.item() if hasattr(v, "item") else v) for k, v in result.stats.items()},
         **memory.record(),
-        "frame_mode": cfg.frame_mode or film["frame_mode"],
+        "frame_mode": frame_mode,
         "temporal_bins": film.get("temporal_bins", 0),
         "start_opl_m": film.get("start_opl", 0.0),
         "bin_width_opl_m": film.get("bin_width_opl", 0.003),
-        "frame_units": "W m^-2 sr^-1 per bin"
-        if (cfg.frame_mode or film["frame_mode"]) == "bins"
-        else "W m^-2 sr^-1 per metre of OPL",
+        "frame_units": FRAME_UNITS.get(frame_mode, ""),
         "camera_leg_included": not cfg.camera_unwarp,
         "config": cfg.model_dump(),
     }

@@ -445,7 +445,19 @@ def test_run_reference_stage_writes_everything(tmp_path):
     assert transient_steady.mean() > 0
     timing = json.loads((out / "timing.json").read_text())
     assert {"steady", "transient", "warnings", "film", "camera_leg_included", "frame_units"} <= set(timing)
-    assert timing["camera_leg_included"] is True and timing["frame_units"] == "W m^-2 sr^-1 per bin"
+    assert timing["camera_leg_included"] is True and timing["frame_units"].startswith("W m^-2 sr^-1 per bin")
+    # frames.json and each EXR's header carry the time axis: frame k at OPL 3.9 + (k + 1/2) 0.1 m.
+    about = json.loads((out / "frames.json").read_text())
+    assert about["frame_mode"] == "bins" and about["renderer"] == "mitransient" and about["shape"] == [20, 8, 12, 3]
+    np.testing.assert_allclose(about["frame_centres_opl_m"], 3.9 + (np.arange(20) + 0.5) * 0.1)
+    import OpenImageIO as oiio
+
+    header = oiio.ImageInput.open(str(exrs[7]))
+    spec = header.spec()
+    header.close()
+    assert spec.getattribute("penitentes:opl_m") == pytest.approx(3.9 + 7.5 * 0.1)
+    assert spec.getattribute("penitentes:time_ns_since_first_light") == pytest.approx(0.75 * 1e9 / 299_792_458.0)
+    assert spec.getattribute("penitentes:frame_mode") == "bins"
     for key in ("steady", "transient"):
         assert {"seconds", "spp", "passes", "peak_memory_mib", "variant"} <= set(timing[key])
         assert (timing[key]["spp"], timing[key]["passes"]) == (8, 2)
