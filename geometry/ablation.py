@@ -1,4 +1,4 @@
-"""Radiative ablation of a periodic height field (penitentes.md 3.8-3.12, 5, 6).
+"""Radiative ablation of a periodic height field (DESIGN.md 3.8-3.12, 5, 6).
 
     dh/dt = - eps k (1 - a) / (rho L_eff) * [ E_dir,h + (E_sky + E_ter) sqrt(1 + |grad h|^2) ]
             + D lap h - K lap^2 h  [+ A_B (-(-lap)^(1/2) h)]
@@ -70,7 +70,7 @@ def spectral_linear_step(
 
 
 def betterton_intensity_1d(h: np.ndarray, spacing: float, periods: int = 4) -> np.ndarray:
-    """Scattered-light integral of penitentes.md 3.11 by direct quadrature on a periodic 1-D profile.
+    """Scattered-light integral of DESIGN.md 3.11 by direct quadrature on a periodic 1-D profile.
 
     I(x) = (1/pi) integral of [dh - h'(x) dx] / (dx^2 + dh^2) dx', summed cell by cell over
     +-``periods`` periodic images. The singular cell takes its limit h''/2; the far images beyond
@@ -318,7 +318,7 @@ def grow_field(
     rng: np.random.Generator,
     progress: Callable[[int], None] | None = None,
 ) -> GrowthResult:
-    """Grow a field from ``h0`` over ``settings.days`` days of sun (penitentes.md section 5)."""
+    """Grow a field from ``h0`` over ``settings.days`` days of sun (DESIGN.md section 5)."""
     import time
 
     h = irradiance.check_height_field(h0, "initial height field").copy()

@@ -3,7 +3,7 @@ weighted by the sky view factor, and light reflected by the surrounding snow (1-
 
 Height fields are arrays ``h[iy, ix]`` [m] on a square periodic grid of spacing ``spacing`` [m];
 rows run north (y), columns east (x). Visibility uses sweeps along sheared grid lines
-(penitentes.md 6.3): along a direction whose larger component is one cell per step, every sample
+(DESIGN.md 6.3): along a direction whose larger component is one cell per step, every sample
 of a step shares one fractional offset, so each step is two array slices and a blend. Cost is
 O(N^2) per step and at most one domain period of steps per direction.
 """
@@ -237,7 +237,7 @@ def radiation_budget(
     horizons: Horizons,
     bounces: int,
 ) -> RadiationBudget:
-    """Irradiance and absorbed flux for one sun position (penitentes.md 3.4-3.7).
+    """Irradiance and absorbed flux for one sun position (DESIGN.md 3.4-3.7).
 
     direct_normal: S_b [W m-2]; diffuse_horizontal: S_d [W m-2]; albedo: local broadband albedo a [-].
     """

@@ -1,4 +1,4 @@
-"""Morphology and radiative metrics of a grown field (penitentes.md 7, V3 and V4).
+"""Morphology and radiative metrics of a grown field (DESIGN.md 7, V3 and V4).
 
 Angles are reported in degrees; azimuths clockwise from north. Heights [m], wavelengths [m].
 """
@@ -67,14 +67,14 @@ def transect_power_spectrum(h: np.ndarray, spacing: float, axis: int = 0) -> tup
 
 def row_spacing(h: np.ndarray, spacing: float) -> float:
     """lambda_dom of V3 for east-west rows [m]: the wavelength at the peak of the north-south
-    transect spectrum (penitentes.md 7 allows it in place of the radial average), refined by a
+    transect spectrum (DESIGN.md 7 allows it in place of the radial average), refined by a
     parabola in log power.
 
     Across E-W rows the N-S spectrum holds the rows' power on every transect, where the radial
     average spreads it over a ring that is empty away from the k_y axis. The search starts at L/2:
     a spacing is a repeat, and the one cycle of the fundamental (lambda = L) is not one. That bin
     holds the mean-height undulation between more and less developed patches, and the domain is
-    meant to hold 8-16 spacings (penitentes.md 4), not one. Grown fields have a broad N-S spectrum,
+    meant to hold 8-16 spacings (DESIGN.md 4), not one. Grown fields have a broad N-S spectrum,
     nearly flat from the crest spacing up to the domain, so the peak moves from seed to seed;
     crest_spacing is the steadier figure.
     """
@@ -170,7 +170,7 @@ def lean(h: np.ndarray, spacing: float, steep_deg: float = 30.0, sector_deg: flo
 
 
 def relief(h: np.ndarray) -> dict:
-    """RMS height, the relief 2 sqrt 2 RMS (crest to trough of near-sinusoidal rows, penitentes.md V3)
+    """RMS height, the relief 2 sqrt 2 RMS (crest to trough of near-sinusoidal rows, DESIGN.md V3)
     and the 1-99 % range [m]."""
     rms = float(np.std(h))
     lo, hi = np.percentile(h, [1, 99])

@@ -1,7 +1,7 @@
 """Settings of the geometry stage: site and sun, snow/ice, ablation model, numerics, mesh, pictures.
 
 Defaults describe Tapado Glacier, Chile (30.1 deg S) from 25 Nov for 40 days on a demo-sized grid;
-site presets in configs/presets/sites/ override them. Symbols follow penitentes.md section 4.
+site presets in configs/presets/sites/ override them. Symbols follow geometry/DESIGN.md section 4.
 """
 
 from __future__ import annotations
@@ -101,7 +101,9 @@ class GeometryConfig(StrictModel):
     grid_cells: int = Field(128, ge=16, le=2048, description="Cells per side of the periodic square grid N [-].")
     domain_size: float = Field(8.0, gt=0, le=1e4, description="Side L of the periodic domain [m].")
     initial_roughness_rms: float = Field(
-        0.067, gt=0, description="RMS height of the seeded noise, 1-5 % of the mature spacing (penitentes.md 3.12) [m]."
+        0.067,
+        gt=0,
+        description="RMS height of the seeded noise, 1-5 % of the mature spacing (geometry/DESIGN.md 3.12) [m].",
     )
     initial_wavelength: float = Field(0.67, gt=0, description="Wavelength at the centre of the seeded noise band [m].")
     azimuths: int = Field(16, ge=8, le=64, description="Horizon azimuths M [-].")

@@ -1,4 +1,4 @@
-"""Recession terms of the growth loop (penitentes.md 3.8, 3.9, 6.1): the upwinded direct beam, the
+"""Recession terms of the growth loop (geometry/DESIGN.md 3.8, 3.9, 6.1): the upwinded direct beam, the
 loss to the sky, the flux-time clock of the linear terms (lambda* = 4 pi D / A_B in a full run), and
 the Lliboutry switch integrated over the wall faces a column stands for."""
 

@@ -1,4 +1,4 @@
-"""V1 (penitentes.md 7): linear dispersion of the Betterton-type kernel with diffusion.
+"""V1 (geometry/DESIGN.md 7): linear dispersion of the Betterton-type kernel with diffusion.
 
 sigma(k) = A_B |k| - D k^2, lambda* = 4 pi D / A_B = 4.40 cm for A_B = 7.14e-7 m/s, D = 2.5e-9 m2/s.
 The 1-D run uses the real-space quadrature (not the spectral shortcut), so it tests the kernel.

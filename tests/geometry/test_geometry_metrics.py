@@ -1,4 +1,4 @@
-"""V3 spacing and height metrics (penitentes.md 7) on fields whose answer is known by construction."""
+"""V3 spacing and height metrics (geometry/DESIGN.md 7) on fields whose answer is known by construction."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""V3 morphology (penitentes.md 7) on a reduced grid: 64^2 cells over 4 m (6.25 cm spacing, the
+"""V3 morphology (geometry/DESIGN.md 7) on a reduced grid: 64^2 cells over 4 m (6.25 cm spacing, the
 demo's spacing on a quarter of its area), the Tapado site preset (30.1 S, 25 Nov + 40 days, glacier
 ice), full diurnal sun path with 12 positions per day; the control is the 65 S preset (the same
 setting moved to 65 S). The rows here are 0.5-0.7 m apart crest to crest, so 4 m holds 6-8 of them:
