@@ -100,7 +100,10 @@ class Horizons:
     horizontal distance of the snow seen in each azimuth [m] (0 where only sky is seen); sky_view: (N, N)
     sky view factor [-]; terrain_weight: (M, N, N) share of the hemisphere's cosine-weighted view
     that is snow in each azimuth sector [-], summing to 1 - sky_view; openness: (N, N) sky view of
-    a level receiver at each point, mean of cos^2 of the (non-negative) horizon elevation [-].
+    a level receiver at each point, mean of cos^2 of the (non-negative) horizon elevation [-];
+    shelter: (N, N) mean over azimuths of the tangent of that non-negative horizon elevation, the
+    terrain shelter index Sx of Winstral et al. (2002) averaged over wind directions [-]. Openness
+    departs from 1 only at second order in the horizon angle, shelter at first order.
     """
 
     azimuths: np.ndarray
@@ -108,6 +111,7 @@ class Horizons:
     sky_view: np.ndarray
     terrain_weight: np.ndarray
     openness: np.ndarray
+    shelter: np.ndarray
 
 
 def _sector_sky(tan_horizon: np.ndarray, slope_along: np.ndarray, cos_slope: np.ndarray) -> np.ndarray:
@@ -123,7 +127,12 @@ def _sector_sky(tan_horizon: np.ndarray, slope_along: np.ndarray, cos_slope: np.
 
 
 def compute_horizons(
-    h: np.ndarray, spacing: float, n_azimuths: int, rotation: float = 0.0, tolerance_deg: float = 0.25
+    h: np.ndarray,
+    spacing: float,
+    n_azimuths: int,
+    rotation: float = 0.0,
+    tolerance_deg: float = 0.25,
+    wake_slope: float = 0.0,
 ) -> Horizons:
     """Horizon angles, sky view factor and terrain view weights by sheared sweeps in M azimuths.
 
@@ -145,6 +154,7 @@ def compute_horizons(
     sky_sector = np.empty((n_azimuths, n, n))
     open_sector = np.empty((n_azimuths, n, n))
     openness = np.zeros_like(h)
+    shelter = np.zeros_like(h)
     for m, psi in enumerate(azimuths):
         east, north = np.sin(psi), np.cos(psi)
         slope_along = p * east + q * north
@@ -170,13 +180,14 @@ def compute_horizons(
         open_sector[m] = open_sector_m
         distance[m] = dist
         openness += 1.0 / (1.0 + tan_level * tan_level) / n_azimuths
+        shelter += np.maximum(tan_level - wake_slope, 0.0) / n_azimuths
     sky_view = np.clip(sky_sector.mean(axis=0), 0.0, 1.0)
     terrain = np.clip(open_sector - sky_sector, 0.0, None)
     total = terrain.sum(axis=0)
     # Everything in the hemisphere that is not sky is snow: scale sectors to sum to 1 - V_sky.
     scale = np.divide(1.0 - sky_view, total, out=np.zeros_like(total), where=total > 1e-12)
     terrain_weight = (terrain * scale).astype(np.float32)
-    return Horizons(azimuths, distance, sky_view, terrain_weight, openness)
+    return Horizons(azimuths, distance, sky_view, terrain_weight, openness, shelter)
 
 
 # Where the seen radiosity is sampled, as fractions of the view-weighted distance; two samples

@@ -61,14 +61,16 @@ def test_flat_ice_keeps_the_absorbed_shortwave_above_the_sky_loss():
 
 
 def test_lab_preset_grows_at_lambda_star():
-    """A and D both run on flux time, so a full sun-path run selects lambda* = 4 pi D / A_B (4.4 cm)."""
+    """V1 from white noise in a full sun-path run: the scattered light and all other absorbed light are
+    spread over the e-folding depth l, so the field selects lambda* = 2 pi l (4.4 cm for l = 7 mm)."""
     cfg = GeometryConfig(**yaml.safe_load((SITES / "lab_micro.yaml").read_text())["geometry"])
     rng = np.random.default_rng(1)
     h0 = ablation.initial_height_field(
         cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
     )
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
-    lambda_star = 4 * np.pi * cfg.diffusivity / cfg.scattered_light_coefficient
+    assert cfg.initial_wavelength is None  # white noise: nothing seeds the answer
+    lambda_star = 2 * np.pi * cfg.optical_efolding_depth
     assert metrics.dominant_wavelength(grown.height, cfg.spacing) == pytest.approx(lambda_star, rel=0.15)
     assert 5 < grown.height.std() / h0.std() < 500  # grows, but stays a lab-sized form
 
