@@ -75,6 +75,31 @@ def test_lab_preset_grows_at_lambda_star():
     assert 5 < grown.height.std() / h0.std() < 500  # grows, but stays a lab-sized form
 
 
+@pytest.mark.slow
+def test_lab_onset_scales_with_the_efolding_depth():
+    """V7 in a full sun-path run: doubling l (and the domain, and the days, since sigma* = A_B / (2 l))
+    doubles the wavelength that white noise develops, within 20 %. 256^2 cells over 12 onset
+    wavelengths, so that the spectrum's bins resolve the peak (the preset's 3 do not); ~1 min."""
+    site = yaml.safe_load((SITES / "lab_micro.yaml").read_text())["geometry"]
+    onsets = []
+    for scale in (1, 2):
+        cfg = GeometryConfig(
+            **{
+                **site,
+                "optical_efolding_depth": scale * site["optical_efolding_depth"],
+                "grid_cells": 256,
+                "domain_size": scale * 4 * site["domain_size"],
+                "days": scale * site["days"],
+                "initial_roughness_rms": scale * site["initial_roughness_rms"],
+            }
+        )
+        rng = np.random.default_rng(3)
+        h0 = ablation.initial_height_field(cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, None, rng)
+        grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
+        onsets.append(metrics.dominant_wavelength(grown.height, cfg.spacing))
+    assert onsets[1] / onsets[0] == pytest.approx(2.0, rel=0.2), onsets
+
+
 def test_uniform_latent_heat_leaves_the_recession_as_it_was():
     """Face means only matter where the switch varies: with one 1/L_eff everywhere the direct beam
     and the Godunov factor come back unweighted."""
