@@ -12,8 +12,11 @@ that surface: the top at the cell's own value, the face at the mean of its two e
 rule). Weighting the whole column by its top would let a one-cell crest sublimate its sunlit
 wall, however deep and sheltered, and grid-scale walls between pits would never fall.
 k = max(0, Q - sink) / Q keeps the part of each day's absorbed shortwave Q above the loss to the
-sky (geometry.sky_loss times the sky view). The linear terms are integrated exactly in Fourier
-space on flux time. Time stepping freezes the geometry for each horizon refresh (one per
+sky (geometry.sky_loss times the sky view, its turbulent share stopping where the air is still).
+The switch reads sheltering from the shelter index of the horizons, and the melt fraction and the
+scattered light are spread over the e-folding depth l of absorbed light, 1 / (1 + (k l)^2), which
+selects the onset wavelength 2 pi l (DESIGN.md 3.9, 3.10). The linear terms are integrated exactly
+in Fourier space on flux time. Time stepping freezes the geometry for each horizon refresh (one per
 simulated day by default), integrates the absorbed energy over that period's sun positions, and
 applies it in sub-steps that each respect the Hamilton-Jacobi CFL limit (6.2). Heights are [m],
 times [s].
@@ -111,9 +114,9 @@ def melt_fraction(exposure: np.ndarray, centre: float, width: float) -> np.ndarr
 def sheltered_melt_fraction(shelter: np.ndarray, full_melt_deg: float) -> np.ndarray:
     """Lliboutry switch weight read from ventilation (DESIGN.md 3.9): w = clip(Sx / tan(theta_m), 0, 1).
 
-    Sx is the shelter index (mean tangent of the non-negative horizon over azimuths): 0 on a point
-    that nothing around stands above, which the wind skimming the field keeps cold and sublimating;
-    the surface is fully melting once the surroundings rise theta_m [deg] above it on average.
+    Sx is the shelter index of the horizons (mean over azimuths of how far the horizon's tangent
+    rises above the wake slope): 0 on a point that nothing around stands above, which the wind
+    skimming the field keeps cold and sublimating; the surface fully melts at Sx = tan(theta_m).
     """
     return np.clip(shelter / np.tan(np.radians(full_melt_deg)), 0.0, 1.0)
 

@@ -132,7 +132,7 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     timings["metrics_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    preview.save_metrics_plot(out_dir / "metrics.png", h, spacing, grown.relief_history, summary_metrics)
+    preview.save_metrics_plot(out_dir / "metrics.png", h, spacing, grown.relief_history, summary_metrics, history)
     preview.save_hillshade(
         out_dir / "hillshade.png",
         h,
