@@ -83,7 +83,8 @@ def main() -> None:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     md += [
-        f"| {r['grid']} | {r['domain_m']:g} | {r['days']} | {r['growth_s']:.2f} | {r['per_day_s']:.2f} | {r['horizons_s']:.2f} | "
+        f"| {r['grid']} | {r['domain_m']:g} | {r['days']} | {r['growth_s']:.2f} | {r['per_day_s']:.2f} | "
+        f"{r['horizons_s']:.2f} | "
         f"{r['mesh_s']:.2f} | {r['metrics_s']:.2f} | {r['total_s']:.2f} | {r['triangles']} |"
         for r in rows
     ]

@@ -26,10 +26,10 @@ def _alternate_rows() -> np.ndarray:
 
 
 def _grow_rows(**overrides) -> tuple[np.ndarray, float]:
-    cfg = GeometryConfig(
-        **{**load_raw(SITES / "tapado.yaml")["geometry"], "grid_cells": N, "domain_size": L, "snapshots": 2, **overrides}
-    )
-    grown = ablation.grow_field(_alternate_rows(), cfg.spacing, ablation.settings_from_config(cfg), np.random.default_rng(0))
+    site = load_raw(SITES / "tapado.yaml")["geometry"]
+    cfg = GeometryConfig(**{**site, "grid_cells": N, "domain_size": L, "snapshots": 2, **overrides})
+    settings = ablation.settings_from_config(cfg)
+    grown = ablation.grow_field(_alternate_rows(), cfg.spacing, settings, np.random.default_rng(0))
     return grown.height, cfg.spacing
 
 
@@ -51,7 +51,9 @@ def _season(seed: int) -> dict:
         **{**load_raw(SITES / "tapado.yaml")["geometry"], "grid_cells": N, "domain_size": L, "days": 60, "snapshots": 2}
     )
     rng = np.random.default_rng(seed)
-    h0 = ablation.initial_height_field(cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
+    h0 = ablation.initial_height_field(
+        cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
+    )
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     return metrics.morphology(grown.height, cfg.spacing)
 
