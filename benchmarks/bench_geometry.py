@@ -39,7 +39,7 @@ def bench(cells: int, domain: float, days: int) -> dict:
     solid = mesh.decimate(mesh.heightfield_solid(grown.height, cfg.spacing, cfg.base_thickness), cfg.max_triangles)
     mesh.manifold_volume(solid)
     t2 = time.perf_counter()
-    metrics.morphology(grown.height, cfg.spacing)
+    shape = metrics.morphology(grown.height, cfg.spacing)
     t3 = time.perf_counter()
     return {
         "grid": f"{cells}^2",
@@ -52,6 +52,8 @@ def bench(cells: int, domain: float, days: int) -> dict:
         "metrics_s": t3 - t2,
         "total_s": t3 - t0,
         "triangles": len(solid.faces),
+        "crest_spacing_m": shape["crest_spacing_m"],
+        "crest_to_trough_m": shape["crest_to_trough_m"],
     }
 
 
@@ -79,13 +81,14 @@ def main() -> None:
         "preset from white noise; growth + mesh + metrics; pictures excluded (~4 s, grid-independent).",
         "",
         "| grid | domain [m] | days | growth [s] | per day [s] | horizons [s] | mesh [s] | metrics [s] | total [s] | "
-        "triangles |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "triangles | crest spacing [m] | H [m] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     md += [
         f"| {r['grid']} | {r['domain_m']:g} | {r['days']} | {r['growth_s']:.2f} | {r['per_day_s']:.2f} | "
         f"{r['horizons_s']:.2f} | "
-        f"{r['mesh_s']:.2f} | {r['metrics_s']:.2f} | {r['total_s']:.2f} | {r['triangles']} |"
+        f"{r['mesh_s']:.2f} | {r['metrics_s']:.2f} | {r['total_s']:.2f} | {r['triangles']} | "
+        f"{r['crest_spacing_m']:.2f} | {r['crest_to_trough_m']:.2f} |"
         for r in rows
     ]
     write_text_atomic(out / "geometry.md", "\n".join(md) + "\n")
