@@ -1,4 +1,4 @@
-"""Radiative ablation of a periodic height field (penitentes.md 3.8-3.12, 5, 6).
+"""Radiative ablation of a periodic height field (DESIGN.md 3.8-3.12, 5, 6).
 
     dh/dt = - eps k (1 - a) / (rho L_eff) * [ E_dir,h + (E_sky + E_ter) sqrt(1 + |grad h|^2) ]
             + D lap h - K lap^2 h  [+ A_B (-(-lap)^(1/2) h)]
@@ -12,8 +12,11 @@ that surface: the top at the cell's own value, the face at the mean of its two e
 rule). Weighting the whole column by its top would let a one-cell crest sublimate its sunlit
 wall, however deep and sheltered, and grid-scale walls between pits would never fall.
 k = max(0, Q - sink) / Q keeps the part of each day's absorbed shortwave Q above the loss to the
-sky (geometry.sky_loss times the sky view). The linear terms are integrated exactly in Fourier
-space on flux time. Time stepping freezes the geometry for each horizon refresh (one per
+sky (geometry.sky_loss times the sky view, its turbulent share stopping where the air is still).
+The switch reads sheltering from the shelter index of the horizons, and the melt fraction and the
+scattered light are spread over the e-folding depth l of absorbed light, 1 / (1 + (k l)^2), which
+selects the onset wavelength 2 pi l (DESIGN.md 3.9, 3.10). The linear terms are integrated exactly
+in Fourier space on flux time. Time stepping freezes the geometry for each horizon refresh (one per
 simulated day by default), integrates the absorbed energy over that period's sun positions, and
 applies it in sub-steps that each respect the Hamilton-Jacobi CFL limit (6.2). Heights are [m],
 times [s].
@@ -26,6 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.fft
 
 from geometry import irradiance, sunpath
 
@@ -43,11 +47,17 @@ def wavenumbers(n: int, spacing: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def linear_growth_rate(
-    k: np.ndarray, scattered_coefficient: float, diffusivity: float, hyperdiffusivity: float = 0.0
+    k: np.ndarray,
+    scattered_coefficient: float,
+    diffusivity: float,
+    hyperdiffusivity: float = 0.0,
+    efolding_depth: float = 0.0,
 ) -> np.ndarray:
-    """sigma(k) = A_B |k| - D k^2 - K k^4 [s-1] for |k| [rad m-1], A_B [m s-1], D [m2 s-1], K [m4 s-1]."""
+    """sigma(k) = A_B |k| / (1 + (k l)^2) - D k^2 - K k^4 [s-1] for |k| [rad m-1], A_B [m s-1], D [m2 s-1],
+    K [m4 s-1], l [m]: the scattered light absorbed is spread over the e-folding depth l like all light."""
     k = np.abs(k)
-    return scattered_coefficient * k - diffusivity * k**2 - hyperdiffusivity * k**4
+    spread = 1.0 / (1.0 + (k * efolding_depth) ** 2)
+    return scattered_coefficient * k * spread - diffusivity * k**2 - hyperdiffusivity * k**4
 
 
 def spectral_linear_step(
@@ -57,6 +67,7 @@ def spectral_linear_step(
     scattered_coefficient: float,
     diffusivity: float,
     hyperdiffusivity: float,
+    efolding_depth: float = 0.0,
 ) -> np.ndarray:
     """Exact (exponential-integrator) step of the linear terms over ``duration`` [s] (6.2).
 
@@ -64,13 +75,13 @@ def spectral_linear_step(
     so A_B and D scale together with the sun and the band stays at lambda* = 4 pi D / A_B.
     """
     kx, ky = wavenumbers(h.shape[0], spacing)
-    sigma = linear_growth_rate(np.hypot(kx, ky), scattered_coefficient, diffusivity, hyperdiffusivity)
+    sigma = linear_growth_rate(np.hypot(kx, ky), scattered_coefficient, diffusivity, hyperdiffusivity, efolding_depth)
     spectrum = np.fft.fft2(h) * np.exp(sigma * duration)
     return np.real(np.fft.ifft2(spectrum))
 
 
 def betterton_intensity_1d(h: np.ndarray, spacing: float, periods: int = 4) -> np.ndarray:
-    """Scattered-light integral of penitentes.md 3.11 by direct quadrature on a periodic 1-D profile.
+    """Scattered-light integral of DESIGN.md 3.11 by direct quadrature on a periodic 1-D profile.
 
     I(x) = (1/pi) integral of [dh - h'(x) dx] / (dx^2 + dh^2) dx', summed cell by cell over
     +-``periods`` periodic images. The singular cell takes its limit h''/2; the far images beyond
@@ -98,6 +109,24 @@ def melt_fraction(exposure: np.ndarray, centre: float, width: float) -> np.ndarr
     receiver) or the facet's own sky view factor, as configured.
     """
     return np.clip((centre - exposure) / width, 0.0, 1.0)
+
+
+def sheltered_melt_fraction(shelter: np.ndarray, full_melt_deg: float) -> np.ndarray:
+    """Lliboutry switch weight read from ventilation (DESIGN.md 3.9): w = clip(Sx / tan(theta_m), 0, 1).
+
+    Sx is the shelter index of the horizons (mean over azimuths of how far the horizon's tangent
+    rises above the wake slope): 0 on a point that nothing around stands above, which the wind
+    skimming the field keeps cold and sublimating; the surface fully melts at Sx = tan(theta_m).
+    """
+    return np.clip(shelter / np.tan(np.radians(full_melt_deg)), 0.0, 1.0)
+
+
+def switch_melt_fraction(horizons: irradiance.Horizons, s: GrowthSettings) -> np.ndarray:
+    """Melt fraction w of every cell from the configured sheltering proxy (DESIGN.md 3.9)."""
+    if s.switch_proxy == "shelter":
+        return sheltered_melt_fraction(horizons.shelter, s.shelter_full_melt_deg)
+    exposure = horizons.sky_view if s.switch_proxy == "sky_view" else horizons.openness
+    return melt_fraction(exposure, s.switch_centre, s.switch_width)
 
 
 def net_energy_fraction(absorbed: np.ndarray, sink: np.ndarray) -> np.ndarray:
@@ -190,15 +219,45 @@ def direct_beam_mass(p: np.ndarray, q: np.ndarray, sun: np.ndarray, inverse_heat
     return np.where(direct_beam_lowering(p, q, sun) > 0.0, weighted, 0.0)
 
 
-def initial_height_field(n: int, spacing: float, rms: float, wavelength: float, rng: np.random.Generator) -> np.ndarray:
-    """Flat snow plus isotropic band-limited Gaussian noise [m] with RMS ``rms`` [m], its power
-    centred on ``wavelength`` [m] (a Gaussian band of relative width 0.5 in |k|)."""
+def penetration_filter(n: int, spacing: float, efolding_depth: float) -> np.ndarray:
+    """Transfer function 1 / (1 + (|k| l)^2) of absorbed energy spread by diffuse light (DESIGN.md 3.10),
+    on the rfft2 layout of an n x n grid; l = efolding_depth [m]. It keeps the mean (k = 0) and
+    damps features smaller than l."""
+    ky = 2.0 * np.pi * np.fft.fftfreq(n, d=spacing)
+    kx = 2.0 * np.pi * np.fft.rfftfreq(n, d=spacing)
+    k2 = ky[:, None] ** 2 + kx[None, :] ** 2
+    return 1.0 / (1.0 + k2 * efolding_depth**2)
+
+
+def spread_by_penetration(field: np.ndarray, transfer: np.ndarray | None) -> np.ndarray:
+    """Apply a penetration_filter to a periodic field (None leaves it as it is)."""
+    if transfer is None:
+        return field
+    return scipy.fft.irfft2(scipy.fft.rfft2(field) * transfer, s=field.shape)
+
+
+def onset_wavelength(efolding_depth: float) -> float:
+    """lambda* = 2 pi l [m]: where a scale-free growth rate c |k| filtered by 1 / (1 + (k l)^2) peaks
+    (DESIGN.md 7, V1)."""
+    return 2.0 * np.pi * efolding_depth
+
+
+def initial_height_field(
+    n: int, spacing: float, rms: float, wavelength: float | None, rng: np.random.Generator
+) -> np.ndarray:
+    """Flat snow plus Gaussian noise [m] with RMS ``rms`` [m]: white (every wavenumber equally) when
+    ``wavelength`` is None, else isotropic band-limited noise with its power centred on ``wavelength``
+    [m] (a Gaussian band of relative width 0.5 in |k|), the explicit override of DESIGN.md 3.12."""
+    white = rng.standard_normal((n, n))
+    if wavelength is None:
+        noise = white - white.mean()
+        return noise * (rms / noise.std())
     kx, ky = wavenumbers(n, spacing)
     k = np.hypot(kx, ky)
     k0 = 2.0 * np.pi / wavelength
     band = np.exp(-0.5 * ((k - k0) / (0.5 * k0)) ** 2)
     band[0, 0] = 0.0
-    noise = np.real(np.fft.ifft2(np.fft.fft2(rng.standard_normal((n, n))) * band))
+    noise = np.real(np.fft.ifft2(np.fft.fft2(white) * band))
     std = noise.std()
     if std == 0.0:
         raise ValueError(
@@ -241,7 +300,8 @@ class GrowthSettings:
     melt_enabled: bool
     switch_centre: float
     switch_width: float
-    switch_proxy: str  # "sky_view" or "openness"
+    switch_proxy: str  # "shelter", "sky_view" or "openness"
+    shelter_full_melt_deg: float  # theta_m of the shelter proxy [deg]
     diffusivity: float  # D [m2 s-1]
     hyperdiffusivity: float  # K [m4 s-1]
     scattered_coefficient: float  # A_B at the reference flux [m s-1]
@@ -252,6 +312,9 @@ class GrowthSettings:
     sky_loss: float  # net longwave + turbulent loss of a facet open to the sky, day mean [W m-2]
     cfl: float
     snapshots: int
+    wake_slope: float = 0.0  # [-]
+    turbulent_share: float = 0.0  # share of sky_loss that stops where the air is still [-]
+    efolding_depth: float = 0.0  # l [m], 0 = no penetration spreading
 
 
 @dataclass
@@ -279,6 +342,7 @@ def _period_energy(
     chunk: np.ndarray,
     horizons: irradiance.Horizons,
     inverse_heat: np.ndarray,
+    melt: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Absorbed shortwave of one frozen-geometry period, split for the recession step.
 
@@ -307,7 +371,8 @@ def _period_energy(
     absorbed = absorptance * (direct + sky + terrain)
     # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
     share = float(sun.durations[chunk].sum() / sun.durations.sum())
-    kept = net_energy_fraction(absorbed, s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view)
+    ventilated = 1.0 - s.turbulent_share * melt
+    kept = net_energy_fraction(absorbed, s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view * ventilated)
     return absorptance * direct_mass * kept, absorptance * (sky + terrain) * kept, absorbed, flux_seconds
 
 
@@ -318,7 +383,7 @@ def grow_field(
     rng: np.random.Generator,
     progress: Callable[[int], None] | None = None,
 ) -> GrowthResult:
-    """Grow a field from ``h0`` over ``settings.days`` days of sun (penitentes.md section 5)."""
+    """Grow a field from ``h0`` over ``settings.days`` days of sun (DESIGN.md section 5)."""
     import time
 
     h = irradiance.check_height_field(h0, "initial height field").copy()
@@ -329,19 +394,23 @@ def grow_field(
     clamp_sum, clamp_count, max_change = 0.0, 0, 0.0
     timings = {"horizons_s": 0.0, "radiation_s": 0.0, "update_s": 0.0}
     horizons, absorbed, melt = None, np.zeros_like(h), np.zeros_like(h)
+    transfer = penetration_filter(h.shape[0], spacing, s.efolding_depth) if s.efolding_depth > 0 else None
     for day in range(s.days):
         sun = sunpath.daily_sun_positions(s.latitude, s.start_day_of_year + day, s.sun_positions_per_day)
         for chunk in np.array_split(np.arange(len(sun.durations)), s.refreshes_per_day):
             if chunk.size == 0:
                 continue
             t0 = time.perf_counter()
-            horizons = irradiance.compute_horizons(h, spacing, s.azimuths, rotation=rng.uniform(0, 2 * np.pi))
+            horizons = irradiance.compute_horizons(
+                h, spacing, s.azimuths, rotation=rng.uniform(0, 2 * np.pi), wake_slope=s.wake_slope
+            )
             t1 = time.perf_counter()
-            exposure = horizons.sky_view if s.switch_proxy == "sky_view" else horizons.openness
-            melt = melt_fraction(exposure, s.switch_centre, s.switch_width) if s.melt_enabled else np.zeros_like(h)
+            melt = switch_melt_fraction(horizons, s) if s.melt_enabled else np.zeros_like(h)
+            # Absorbed light warms the ice over the e-folding depth: the melting state varies over l, not per cell.
+            melt = np.clip(spread_by_penetration(melt, transfer), 0.0, 1.0)
             inverse_heat = inverse_latent_heat(melt)
             direct_mass, diffuse, absorbed, flux_seconds = _period_energy(
-                h, spacing, s, sun, chunk, horizons, inverse_heat
+                h, spacing, s, sun, chunk, horizons, inverse_heat, melt
             )
             t2 = time.perf_counter()
             volume_per_mass = s.ablation_efficiency / s.density  # [m3 kg-1]
@@ -357,7 +426,7 @@ def grow_field(
                 clamp_sum, clamp_count = clamp_sum + clamped, clamp_count + 1
             # Linear terms run on flux time, like A_B, so the selected band stays lambda* = 4 pi D / A_B.
             h = spectral_linear_step(
-                h, spacing, flux_seconds, s.scattered_coefficient, s.diffusivity, s.hyperdiffusivity
+                h, spacing, flux_seconds, s.scattered_coefficient, s.diffusivity, s.hyperdiffusivity, s.efolding_depth
             )
             irradiance.check_height_field(h, f"height field after day {day + 1}")
             change = h - h_before
@@ -404,6 +473,10 @@ def settings_from_config(cfg) -> GrowthSettings:
         switch_centre=cfg.switch_centre,
         switch_width=cfg.switch_width,
         switch_proxy=cfg.switch_proxy,
+        shelter_full_melt_deg=cfg.shelter_full_melt_deg,
+        wake_slope=cfg.wake_slope,
+        turbulent_share=cfg.turbulent_loss_share,
+        efolding_depth=cfg.optical_efolding_depth,
         diffusivity=cfg.diffusivity,
         hyperdiffusivity=cfg.hyperdiffusivity,
         scattered_coefficient=cfg.scattered_light_coefficient,

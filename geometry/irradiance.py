@@ -2,16 +2,19 @@
 weighted by the sky view factor, and light reflected by the surrounding snow (1-n bounces).
 
 Height fields are arrays ``h[iy, ix]`` [m] on a square periodic grid of spacing ``spacing`` [m];
-rows run north (y), columns east (x). Visibility uses sweeps along sheared grid lines
-(penitentes.md 6.3): along a direction whose larger component is one cell per step, every sample
-of a step shares one fractional offset, so each step is two array slices and a blend. Cost is
-O(N^2) per step and at most one domain period of steps per direction.
+rows run north (y), columns east (x). Visibility marches along sheared grid lines (DESIGN.md 6.3):
+one cell per step along the direction's major axis, a linear blend along the minor one. The
+marches run cell by cell in numba kernels (rows in parallel), each cell stopping as soon as its
+answer is settled, so flat-lying and deep cells cost a few steps and only the highest crests
+march the whole period.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -43,35 +46,49 @@ def unit_normals(h: np.ndarray, spacing: float) -> np.ndarray:
     return np.stack((-p / norm, -q / norm, 1.0 / norm), axis=-1)
 
 
-class _ShearedMarch:
-    """Samples h at x + j*step along one horizontal direction, for j = 1, 2, ... (periodic wrap)."""
+@numba.njit(inline="always")
+def _sample_along(h, ix, iy, j, step_east, step_north):
+    """h at the point j steps from cell (ix, iy) along a sheared line (steps in cells, one of them
+    +-1): one cell per step along the major axis, linear along the minor one, periodic."""
+    n = h.shape[0]
+    ox, oy = j * step_east, j * step_north
+    fx, fy = math.floor(ox), math.floor(oy)
+    wx, wy = ox - fx, oy - fy  # one of them is zero
+    x0 = (ix + int(fx)) % n
+    y0 = (iy + int(fy)) % n
+    sample = h[y0, x0]
+    if wx > 1e-12:
+        sample = (1.0 - wx) * sample + wx * h[y0, (x0 + 1) % n]
+    elif wy > 1e-12:
+        sample = (1.0 - wy) * sample + wy * h[(y0 + 1) % n, x0]
+    return sample
 
-    def __init__(self, h: np.ndarray, spacing: float, east: float, north: float):
-        self.n = h.shape[0]
-        self.padded = np.pad(h, ((0, self.n + 1), (0, self.n + 1)), mode="wrap")
-        major = max(abs(east), abs(north))
-        self.step_cells = (east / major, north / major)  # (x, y) in cells; one of them is +-1
-        self.step_length = spacing / major  # [m] per step
 
-    def sample(self, j: int) -> np.ndarray:
-        ox, oy = j * self.step_cells[0], j * self.step_cells[1]
-        fx, fy = np.floor(ox), np.floor(oy)
-        wx, wy = ox - fx, oy - fy  # one of them is zero
-        n, p = self.n, self.padded
-        x0, y0 = int(fx) % n, int(fy) % n
-        base = p[y0 : y0 + n, x0 : x0 + n]
-        if wx > 1e-12:
-            return (1.0 - wx) * base + wx * p[y0 : y0 + n, x0 + 1 : x0 + 1 + n]
-        if wy > 1e-12:
-            return (1.0 - wy) * base + wy * p[y0 + 1 : y0 + 1 + n, x0 : x0 + n]
-        return base
+@numba.njit(parallel=True, cache=True)
+def _shadowed(h, step_east, step_north, rise_per_step, max_steps):
+    """True where terrain toward the sun stands above the ray from the cell (rows in parallel)."""
+    n = h.shape[0]
+    top = h.max()
+    out = np.zeros((n, n), dtype=np.bool_)
+    for iy in numba.prange(n):
+        for ix in range(n):
+            height = h[iy, ix]
+            for j in range(1, max_steps + 1):
+                ray = height + j * rise_per_step
+                if ray >= top:
+                    break
+                if _sample_along(h, ix, iy, j, step_east, step_north) > ray:
+                    out[iy, ix] = True
+                    break
+    return out
 
 
 def sun_visibility(h: np.ndarray, spacing: float, sun: np.ndarray, max_periods: float = 2.0) -> np.ndarray:
     """1 where the sun is visible (facing it and not shadowed by the terrain), else 0.
 
-    sun: unit vector (east, north, up). The shadow sweep marches toward the sun for up to
-    ``max_periods`` domain lengths, stopping once the ray is above the highest point.
+    sun: unit vector (east, north, up). Each cell marches toward the sun along a sheared grid line
+    for up to ``max_periods`` domain lengths, stopping at the first occluder or once the ray has
+    risen above the highest point (DESIGN.md 6.3).
     """
     sun = np.asarray(sun, float)
     normals = unit_normals(h, spacing)
@@ -81,15 +98,11 @@ def sun_visibility(h: np.ndarray, spacing: float, sun: np.ndarray, max_periods: 
         return np.zeros_like(h)
     if horizontal < 1e-9:
         return facing.astype(float)
-    tan_elevation = sun[2] / horizontal
-    march = _ShearedMarch(h, spacing, sun[0] / horizontal, sun[1] / horizontal)
-    relief = float(h.max() - h.min())
-    rise_per_step = march.step_length * tan_elevation
-    steps = min(int(np.ceil(relief / rise_per_step)), int(max_periods * h.shape[0])) if relief > 0 else 0
-    shadow_height = np.full_like(h, -np.inf)
-    for j in range(1, steps + 1):
-        np.maximum(shadow_height, march.sample(j) - j * rise_per_step, out=shadow_height)
-    return (facing & (h >= shadow_height)).astype(float)
+    east, north = sun[0] / horizontal, sun[1] / horizontal
+    major = max(abs(east), abs(north))
+    rise_per_step = spacing / major * sun[2] / horizontal
+    shadowed = _shadowed(h, east / major, north / major, rise_per_step, int(max_periods * h.shape[0]))
+    return (facing & ~shadowed).astype(float)
 
 
 @dataclass(frozen=True)
@@ -100,7 +113,10 @@ class Horizons:
     horizontal distance of the snow seen in each azimuth [m] (0 where only sky is seen); sky_view: (N, N)
     sky view factor [-]; terrain_weight: (M, N, N) share of the hemisphere's cosine-weighted view
     that is snow in each azimuth sector [-], summing to 1 - sky_view; openness: (N, N) sky view of
-    a level receiver at each point, mean of cos^2 of the (non-negative) horizon elevation [-].
+    a level receiver at each point, mean of cos^2 of the (non-negative) horizon elevation [-];
+    shelter: (N, N) mean over azimuths of the tangent of that non-negative horizon elevation, the
+    terrain shelter index Sx of Winstral et al. (2002) averaged over wind directions [-]. Openness
+    departs from 1 only at second order in the horizon angle, shelter at first order.
     """
 
     azimuths: np.ndarray
@@ -108,6 +124,7 @@ class Horizons:
     sky_view: np.ndarray
     terrain_weight: np.ndarray
     openness: np.ndarray
+    shelter: np.ndarray
 
 
 def _sector_sky(tan_horizon: np.ndarray, slope_along: np.ndarray, cos_slope: np.ndarray) -> np.ndarray:
@@ -122,8 +139,85 @@ def _sector_sky(tan_horizon: np.ndarray, slope_along: np.ndarray, cos_slope: np.
     return cos_slope * (inv - slope_along * (zenith - t * inv))
 
 
+@numba.njit(cache=True, inline="always")
+def _sector_sky_at(tan_horizon: float, slope_along: float, cos_slope: float) -> float:
+    """_sector_sky for one cell."""
+    inv = 1.0 / (1.0 + tan_horizon * tan_horizon)
+    zenith = 0.5 * np.pi - math.atan(tan_horizon)
+    return cos_slope * (inv - slope_along * (zenith - tan_horizon * inv))
+
+
+# The horizon march takes one-cell steps up to NEAR_STEPS cells, then doubles its step every
+# NEAR_STEPS / 2 steps, sampling a max-filtered copy of h as wide as the step (a max-pyramid, DESIGN.md
+# 6.3): a conservative horizon whose angular error stays under one part in NEAR_STEPS.
+NEAR_STEPS = 32
+
+
+def max_pyramid(h: np.ndarray) -> np.ndarray:
+    """Stack of h max-filtered (periodic, square windows) over 1, 2, 4, ... cells up to the grid size."""
+    levels = [h]
+    width = 2
+    while width <= h.shape[0] // NEAR_STEPS * 2 and width < h.shape[0]:
+        levels.append(ndimage.maximum_filter(h, size=width, mode="wrap"))
+        width *= 2
+    return np.stack(levels)
+
+
+@numba.njit(parallel=True, cache=True)
+def _sweep_azimuth(pyramid, step_east, step_north, step_length, slope_along, cos_slope, headroom, tolerance):
+    """One azimuth's sweep, cell by cell (rows in parallel): the sector's sky integrand, the moment
+    (view weight x distance) of the terrain it exposes, and the level receiver's horizon tangent.
+
+    The march moves along the major axis and blends linearly along the minor one (step_east,
+    step_north in cells, one of them +-1), for at most one domain period, on the max-pyramid (see
+    NEAR_STEPS). A cell stops once no farther point could raise its horizon, or that of a level
+    receiver, by more than ``tolerance`` (a tangent); trough cells close within their own depth.
+    """
+    h = pyramid[0]
+    n = h.shape[0]
+    sky_out = np.empty((n, n))
+    moment_out = np.empty((n, n))
+    level_out = np.empty((n, n))
+    for iy in numba.prange(n):
+        for ix in range(n):
+            height = h[iy, ix]
+            slope, cos_s, room = slope_along[iy, ix], cos_slope[iy, ix], headroom[iy, ix]
+            tan_run = slope  # the facet's own tangent plane bounds what it can see (3.3)
+            sky_run = _sector_sky_at(tan_run, slope, cos_s)
+            moment = 0.0  # sum of (view weight x distance) of the terrain exposed so far
+            level = 0.0  # horizon of a level receiver, never below the horizontal
+            j, stride, level_index, count = 0, 1, 0, 0
+            while j < n:
+                j += stride
+                count += 1
+                r = j * step_length
+                sample = _sample_along(pyramid[level_index], ix, iy, j, step_east, step_north)
+                tan_here = (sample - height) / r
+                if tan_here > level:
+                    level = tan_here
+                if tan_here > tan_run:
+                    tan_run = tan_here
+                    sky_here = _sector_sky_at(tan_run, slope, cos_s)
+                    moment += (sky_run - sky_here) * r
+                    sky_run = sky_here
+                if count % 8 == 0 and room / r < min(tan_run, level) + tolerance:
+                    break
+                if j >= NEAR_STEPS * stride and level_index + 1 < pyramid.shape[0]:
+                    stride *= 2
+                    level_index += 1
+            sky_out[iy, ix] = sky_run
+            moment_out[iy, ix] = moment
+            level_out[iy, ix] = level
+    return sky_out, moment_out, level_out
+
+
 def compute_horizons(
-    h: np.ndarray, spacing: float, n_azimuths: int, rotation: float = 0.0, tolerance_deg: float = 0.25
+    h: np.ndarray,
+    spacing: float,
+    n_azimuths: int,
+    rotation: float = 0.0,
+    tolerance_deg: float = 0.25,
+    wake_slope: float = 0.0,
 ) -> Horizons:
     """Horizon angles, sky view factor and terrain view weights by sheared sweeps in M azimuths.
 
@@ -131,8 +225,8 @@ def compute_horizons(
     snow at the current distance; its weighted mean distance says where the facet looks for terrain.
 
     rotation [rad] turns the whole azimuth set (a random turn per refresh keeps grid axes from
-    imprinting). Each sweep runs at most one domain period and stops early once no farther point
-    could raise any horizon by more than ``tolerance_deg``.
+    imprinting). Each sweep runs at most one domain period; each cell leaves it once no farther point
+    could raise its horizon by more than ``tolerance_deg``.
     """
     h = check_height_field(h)
     n = h.shape[0]
@@ -145,24 +239,15 @@ def compute_horizons(
     sky_sector = np.empty((n_azimuths, n, n))
     open_sector = np.empty((n_azimuths, n, n))
     openness = np.zeros_like(h)
+    shelter = np.zeros_like(h)
+    pyramid = max_pyramid(h)
     for m, psi in enumerate(azimuths):
         east, north = np.sin(psi), np.cos(psi)
         slope_along = p * east + q * north
-        march = _ShearedMarch(h, spacing, east, north)
-        tan_run = slope_along.copy()  # the facet's own tangent plane bounds what it can see (3.3)
-        sky_run = _sector_sky(tan_run, slope_along, cos_slope)
-        seen_moment = np.zeros_like(h)  # sum of (view weight x distance) of the terrain exposed so far
-        tan_level = np.zeros_like(h)  # horizon of a level receiver, never below the horizontal
-        for j in range(1, n + 1):
-            r = j * march.step_length
-            tan_here = (march.sample(j) - h) / r
-            np.maximum(tan_run, tan_here, out=tan_run)
-            np.maximum(tan_level, tan_here, out=tan_level)
-            sky_here = _sector_sky(tan_run, slope_along, cos_slope)
-            seen_moment += (sky_run - sky_here) * r
-            sky_run = sky_here
-            if j % 8 == 0 and np.all(headroom / r - tan_run < tolerance):
-                break
+        major = max(abs(east), abs(north))
+        sky_run, seen_moment, tan_level = _sweep_azimuth(
+            pyramid, east / major, north / major, spacing / major, slope_along, cos_slope, headroom, tolerance
+        )
         open_sector_m = _sector_sky(slope_along, slope_along, cos_slope)
         exposed = open_sector_m - sky_run
         dist = np.divide(seen_moment, exposed, out=np.zeros_like(h), where=exposed > 1e-9)
@@ -170,13 +255,14 @@ def compute_horizons(
         open_sector[m] = open_sector_m
         distance[m] = dist
         openness += 1.0 / (1.0 + tan_level * tan_level) / n_azimuths
+        shelter += np.maximum(tan_level - wake_slope, 0.0) / n_azimuths
     sky_view = np.clip(sky_sector.mean(axis=0), 0.0, 1.0)
     terrain = np.clip(open_sector - sky_sector, 0.0, None)
     total = terrain.sum(axis=0)
     # Everything in the hemisphere that is not sky is snow: scale sectors to sum to 1 - V_sky.
     scale = np.divide(1.0 - sky_view, total, out=np.zeros_like(total), where=total > 1e-12)
     terrain_weight = (terrain * scale).astype(np.float32)
-    return Horizons(azimuths, distance, sky_view, terrain_weight, openness)
+    return Horizons(azimuths, distance, sky_view, terrain_weight, openness, shelter)
 
 
 # Where the seen radiosity is sampled, as fractions of the view-weighted distance; two samples
@@ -237,7 +323,7 @@ def radiation_budget(
     horizons: Horizons,
     bounces: int,
 ) -> RadiationBudget:
-    """Irradiance and absorbed flux for one sun position (penitentes.md 3.4-3.7).
+    """Irradiance and absorbed flux for one sun position (DESIGN.md 3.4-3.7).
 
     direct_normal: S_b [W m-2]; diffuse_horizontal: S_d [W m-2]; albedo: local broadband albedo a [-].
     """

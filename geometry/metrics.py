@@ -1,4 +1,4 @@
-"""Morphology and radiative metrics of a grown field (penitentes.md 7, V3 and V4).
+"""Morphology and radiative metrics of a grown field (DESIGN.md 7, V3 and V4).
 
 Angles are reported in degrees; azimuths clockwise from north. Heights [m], wavelengths [m].
 """
@@ -42,9 +42,12 @@ def _peak_wavelength(k: np.ndarray, power: np.ndarray, first: int) -> float:
 
 def dominant_wavelength(h: np.ndarray, spacing: float) -> float:
     """Wavelength [m] at the peak of the radially averaged spectrum, refined by a parabola in log power
-    (V1: an isotropic band selected by A_B and D)."""
+    (V1: the band selected by the penetration length). As in row_spacing the search starts at L/2: the
+    one cycle of the fundamental is the domain, not a repeat, so the answer is never the domain size."""
     k, power = radial_power_spectrum(h, spacing)
-    return _peak_wavelength(k, power, 1)
+    if power.size < 4:
+        raise ValueError(f"a dominant wavelength needs a grid of at least 6 cells per side, got {h.shape}")
+    return _peak_wavelength(k, power, 2)
 
 
 def _transects(h: np.ndarray, axis: int) -> np.ndarray:
@@ -67,14 +70,14 @@ def transect_power_spectrum(h: np.ndarray, spacing: float, axis: int = 0) -> tup
 
 def row_spacing(h: np.ndarray, spacing: float) -> float:
     """lambda_dom of V3 for east-west rows [m]: the wavelength at the peak of the north-south
-    transect spectrum (penitentes.md 7 allows it in place of the radial average), refined by a
+    transect spectrum (DESIGN.md 7 allows it in place of the radial average), refined by a
     parabola in log power.
 
     Across E-W rows the N-S spectrum holds the rows' power on every transect, where the radial
     average spreads it over a ring that is empty away from the k_y axis. The search starts at L/2:
     a spacing is a repeat, and the one cycle of the fundamental (lambda = L) is not one. That bin
     holds the mean-height undulation between more and less developed patches, and the domain is
-    meant to hold 8-16 spacings (penitentes.md 4), not one. Grown fields have a broad N-S spectrum,
+    meant to hold 8-16 spacings (DESIGN.md 4), not one. Grown fields have a broad N-S spectrum,
     nearly flat from the crest spacing up to the domain, so the peak moves from seed to seed;
     crest_spacing is the steadier figure.
     """
@@ -126,6 +129,27 @@ def crest_spacing(h: np.ndarray, spacing: float, axis: int = 0) -> float:
     return h.shape[axis] * spacing / mean_count if mean_count > 0 else float("inf")
 
 
+def crest_density(h: np.ndarray, spacing: float) -> float:
+    """Crests per m^2 [m-2]: cells higher than their 8 neighbours (periodic) and above the mean surface.
+    Where forms merge the count falls (V5)."""
+    neighbours = [np.roll(np.roll(h, dy, axis=0), dx, axis=1) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
+    peak = np.all([h > other for other in neighbours], axis=0) & (h > h.mean())
+    return float(peak.sum()) / (h.size * spacing**2)
+
+
+def season_history(snapshots: np.ndarray, spacing: float) -> dict:
+    """Spacing, height and crest count of each snapshot (V5): crest_spacing_m and crest_to_trough_m
+    across the rows (N-S transects), their ratio, and crest_density_per_m2."""
+    spacings = [crest_spacing(h, spacing) for h in snapshots]
+    heights = [crest_to_trough(h) for h in snapshots]
+    return {
+        "crest_spacing_m": spacings,
+        "crest_to_trough_m": heights,
+        "spacing_to_height": [s / hh if hh > 0 else float("inf") for s, hh in zip(spacings, heights)],
+        "crest_density_per_m2": [crest_density(h, spacing) for h in snapshots],
+    }
+
+
 def ridge_orientation(h: np.ndarray, spacing: float) -> dict:
     """Structure-tensor orientation: ridges run perpendicular to the dominant gradient direction.
 
@@ -170,7 +194,7 @@ def lean(h: np.ndarray, spacing: float, steep_deg: float = 30.0, sector_deg: flo
 
 
 def relief(h: np.ndarray) -> dict:
-    """RMS height, the relief 2 sqrt 2 RMS (crest to trough of near-sinusoidal rows, penitentes.md V3)
+    """RMS height, the relief 2 sqrt 2 RMS (crest to trough of near-sinusoidal rows, DESIGN.md V3)
     and the 1-99 % range [m]."""
     rms = float(np.std(h))
     lo, hi = np.percentile(h, [1, 99])
@@ -188,16 +212,25 @@ def aspect_histogram(
     return edges, counts / max(counts.sum(), 1)
 
 
+def aspect_table(h: np.ndarray, spacing: float, bins: int = 36, steep_deg: float = 30.0) -> dict:
+    """aspect_histogram as JSON-able lists, to compare with Nicholson et al. (2016) (DESIGN.md 8)."""
+    edges, fraction = aspect_histogram(h, spacing, bins, steep_deg)
+    return {"bin_edges_deg": edges.tolist(), "fraction": fraction.tolist(), "steep_deg": steep_deg}
+
+
 def morphology(h: np.ndarray, spacing: float) -> dict:
     """All shape metrics of one field in a flat dict. spacing_to_height is V3's lambda_dom / H with
-    lambda_dom = row_spacing and H = crest_to_trough (both across the rows, north-south)."""
+    lambda_dom = crest_spacing and H = crest_to_trough (both across the rows, north-south): a grown
+    field's N-S spectrum is broad and its peak (row_spacing) jumps between bins from seed to seed,
+    where the crest count is steady (DESIGN.md 7)."""
     out = relief(h)
     out["crest_to_trough_m"] = crest_to_trough(h, axis=0)
     out["row_spacing_m"] = row_spacing(h, spacing)
     out["crest_spacing_m"] = crest_spacing(h, spacing, axis=0)
     out["dominant_wavelength_m"] = dominant_wavelength(h, spacing)
+    out["crest_density_per_m2"] = crest_density(h, spacing)
     out.update(ridge_orientation(h, spacing))
     out.update(lean(h, spacing))
     height = out["crest_to_trough_m"]
-    out["spacing_to_height"] = out["row_spacing_m"] / height if height > 0 else float("inf")
+    out["spacing_to_height"] = out["crest_spacing_m"] / height if height > 0 else float("inf")
     return out

@@ -47,8 +47,11 @@ def save_hillshade(path: Path, h: np.ndarray, spacing: float, width_px: int, tit
     plt.close(fig)
 
 
-def save_metrics_plot(path: Path, h: np.ndarray, spacing: float, relief_history: np.ndarray, summary: dict) -> None:
-    """Four panels: relief against time, N-S and radial spectra, aspect rose of steep facets, slope histogram."""
+def save_metrics_plot(
+    path: Path, h: np.ndarray, spacing: float, relief_history: np.ndarray, summary: dict, history: dict
+) -> None:
+    """Four panels: the season (relief, crest spacing and crest count against time), N-S and radial
+    spectra, aspect rose of steep facets, slope histogram. history: metrics.season_history plus "day"."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -57,16 +60,23 @@ def save_metrics_plot(path: Path, h: np.ndarray, spacing: float, relief_history:
 
     fig = plt.figure(figsize=(11, 8))
     ax = fig.add_subplot(2, 2, 1)
-    ax.plot(np.arange(len(relief_history)), 2 * np.sqrt(2) * relief_history)
+    ax.plot(np.arange(len(relief_history)), 2 * np.sqrt(2) * relief_history, label="relief 2√2·RMS")
+    ax.plot(history["day"], history["crest_to_trough_m"], label="crest to trough H")
+    ax.plot(history["day"], history["crest_spacing_m"], label="crest spacing λ_dom")
     ax.set_xlabel("day")
-    ax.set_ylabel("relief 2√2·RMS [m]")
-    ax.set_title("relief growth")
+    ax.set_ylabel("[m]")
+    ax.legend(loc="upper left")
+    density = ax.twinx()
+    density.plot(history["day"], history["crest_density_per_m2"], color="k", ls=":", label="crests per m²")
+    density.set_ylabel("crests per m² (dotted)")
+    ax.set_title("the season: forms coarsen and deepen")
     ax = fig.add_subplot(2, 2, 2)
     k, power = metrics.transect_power_spectrum(h, spacing, axis=0)
     ax.loglog(2 * np.pi / k[1:], power[1:], label="N–S transects")
     k, power = metrics.radial_power_spectrum(h, spacing)
     ax.loglog(2 * np.pi / k[1:], power[1:], color="0.6", label="radial average")
-    ax.axvline(summary["row_spacing_m"], color="r", ls="--", label=f"λ_dom = {summary['row_spacing_m']:.2f} m")
+    ax.axvline(summary["crest_spacing_m"], color="r", ls="--", label=f"λ_dom = {summary['crest_spacing_m']:.2f} m")
+    ax.axvline(summary["onset_wavelength_m"], color="g", ls=":", label=f"2πl = {summary['onset_wavelength_m']:.2f} m")
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # labels on every minor tick overlap
     ax.set_xlabel("wavelength [m]")
     ax.set_ylabel("power per bin [m²]")

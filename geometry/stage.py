@@ -102,6 +102,9 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
         summary_metrics["lean_north_deg"] if cfg.latitude < 0 else -summary_metrics["lean_north_deg"]
     )
     summary_metrics.update(noon_radiation_metrics(h, spacing, cfg, last_day))
+    summary_metrics["onset_wavelength_m"] = ablation.onset_wavelength(cfg.optical_efolding_depth)
+    history = {"day": grown.snapshot_days.tolist(), **metrics.season_history(grown.snapshots, spacing)}
+    aspects = metrics.aspect_table(h, spacing)
     summary_metrics.update(
         {
             "initial_relief_m": float(2 * np.sqrt(2) * h0.std()),
@@ -122,12 +125,14 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
             "metrics": summary_metrics,
             "timings_s": timings,
             "relief_history_m": (2 * np.sqrt(2) * grown.relief_history).tolist(),
+            "season_history": history,
+            "aspect_histogram": aspects,
         },
     )
     timings["metrics_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    preview.save_metrics_plot(out_dir / "metrics.png", h, spacing, grown.relief_history, summary_metrics)
+    preview.save_metrics_plot(out_dir / "metrics.png", h, spacing, grown.relief_history, summary_metrics, history)
     preview.save_hillshade(
         out_dir / "hillshade.png",
         h,
@@ -152,12 +157,14 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
             "metrics": summary_metrics,
             "timings_s": timings,
             "relief_history_m": (2 * np.sqrt(2) * grown.relief_history).tolist(),
+            "season_history": history,
+            "aspect_histogram": aspects,
         },
     )
     log.info(
-        "geometry: crest-to-trough %.2f m, row spacing %.2f m (ratio %.2f), %d triangles in %.1f s",
+        "geometry: crest-to-trough %.2f m, crest spacing %.2f m (ratio %.2f), %d triangles in %.1f s",
         summary_metrics["crest_to_trough_m"],
-        summary_metrics["row_spacing_m"],
+        summary_metrics["crest_spacing_m"],
         summary_metrics["spacing_to_height"],
         len(solid.faces),
         timings["total_s"],
@@ -168,6 +175,8 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
         "row_spacing_m": summary_metrics["row_spacing_m"],
         "spacing_to_height": summary_metrics["spacing_to_height"],
         "dominant_wavelength_m": summary_metrics["dominant_wavelength_m"],
+        "crest_spacing_m": summary_metrics["crest_spacing_m"],
+        "crest_density_per_m2": summary_metrics["crest_density_per_m2"],
         "ridge_deviation_from_east_west_deg": summary_metrics["ridge_deviation_from_east_west_deg"],
         "lean_north_deg": summary_metrics["lean_north_deg"],
         "field_albedo": summary_metrics["field_albedo"],

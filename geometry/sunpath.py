@@ -2,7 +2,7 @@
 
 Frame: x = east, y = north, z = up (metres elsewhere, unit vectors here). Latitude is negative in
 the southern hemisphere; azimuths are clockwise from north (east = 90 deg). Formulas follow
-penitentes.md section 3.2 (Cooper 1969 declination).
+DESIGN.md section 3.2 (Cooper 1969 declination).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Settings of the geometry stage: site and sun, snow/ice, ablation model, numerics, mesh, pictures.
 
 Defaults describe Tapado Glacier, Chile (30.1 deg S) from 25 Nov for 40 days on a demo-sized grid;
-site presets in configs/presets/sites/ override them. Symbols follow penitentes.md section 4.
+site presets in configs/presets/sites/ override them. Symbols follow geometry/DESIGN.md section 4.
 """
 
 from __future__ import annotations
@@ -65,14 +65,51 @@ class GeometryConfig(StrictModel):
     melt_enabled: bool = Field(
         True, description="Lliboutry switch on; false = sublimation only (cold lab, planets) [-]."
     )
-    switch_proxy: Literal["sky_view", "openness"] = Field(
-        "openness",
-        description="Sheltering proxy of the switch: the sky view of a level receiver at the point (falls "
-        "toward trough floors), or the facet's own sky view factor (also low on exposed steep "
-        "walls and crests, which then melt as if sheltered) [-].",
+    switch_proxy: Literal["shelter", "sky_view", "openness"] = Field(
+        "shelter",
+        description="Sheltering proxy of the Lliboutry switch: 'shelter' reads ventilation from the shelter index "
+        "Sx (mean over azimuths of how far the surroundings rise above the point beyond the wake slope), first "
+        "order in the relief, so a lower blade among taller ones starts to melt; 'openness' (sky view of a level "
+        "receiver) and 'sky_view' (the facet's own) depart from 1 only at second order [-].",
     )
-    switch_centre: float = Field(0.85, gt=0, lt=1, description="Switch centre V_c: below it cells start to melt [-].")
-    switch_width: float = Field(0.3, gt=0, le=1, description="Switch width dV: melt is complete at V_c - dV [-].")
+    shelter_full_melt_deg: float = Field(
+        45.0,
+        gt=0,
+        lt=90,
+        description="Shelter proxy: mean rise of the surroundings above the wake slope at which the air is still "
+        "and the surface fully melts, w = Sx / tan(theta_m) [deg].",
+    )
+    wake_slope: float = Field(
+        1.0 / 6.0,
+        ge=0,
+        le=1,
+        description="Shelter proxy: slope of the separated wake behind a crest; a crest shelters points below a "
+        "line falling 1 in 6 from it, the flow reattaching ~6 step heights downstream of a backward-facing step "
+        "(Le, Moin & Kim 1997) [-].",
+    )
+    turbulent_loss_share: float = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="Share of geometry.sky_loss that is turbulent (sensible + latent) exchange with the wind; it "
+        "stops where the air is still, so a facet loses sky_loss x V_sky x (1 - share x w). The rest is net "
+        "longwave [estimate] [-].",
+    )
+    switch_centre: float = Field(
+        0.85, gt=0, lt=1, description="Sky-view proxies: switch centre V_c, below it cells start to melt [-]."
+    )
+    switch_width: float = Field(
+        0.3, gt=0, le=1, description="Sky-view proxies: switch width dV, melt is complete at V_c - dV [-]."
+    )
+    optical_efolding_depth: float = Field(
+        0.06,
+        ge=0,
+        le=10,
+        description="e-folding depth l of absorbed sunlight, z_e = 1/k_e of snow_optics.md section 5, broadband "
+        "(absorption-weighted: near-infrared mm, visible 0.3-1 m in bubbly ice) [estimate]. Diffuse light spreads "
+        "the absorbed energy over l, 1/(1 + (k l)^2) in Fourier space, so the wavelength that grows first is "
+        "lambda* = 2 pi l (geometry/DESIGN.md 3.10); 0 = no spreading [m].",
+    )
     diffusivity: float = Field(
         0.0,
         ge=0,
@@ -101,9 +138,17 @@ class GeometryConfig(StrictModel):
     grid_cells: int = Field(128, ge=16, le=2048, description="Cells per side of the periodic square grid N [-].")
     domain_size: float = Field(8.0, gt=0, le=1e4, description="Side L of the periodic domain [m].")
     initial_roughness_rms: float = Field(
-        0.067, gt=0, description="RMS height of the seeded noise, 1-5 % of the mature spacing (penitentes.md 3.12) [m]."
+        0.02,
+        gt=0,
+        description="RMS height of the initial noise, white unless initial_wavelength is set (geometry/DESIGN.md "
+        "3.12) [m].",
     )
-    initial_wavelength: float = Field(0.67, gt=0, description="Wavelength at the centre of the seeded noise band [m].")
+    initial_wavelength: float | None = Field(
+        None,
+        gt=0,
+        description="Override: centre of a band-limited initial noise, which then imposes the spacing; null (the "
+        "default) starts from white noise and lets optical_efolding_depth select it [m].",
+    )
     azimuths: int = Field(16, ge=8, le=64, description="Horizon azimuths M [-].")
     bounces: int = Field(2, ge=0, le=8, description="Terrain-reflection (radiosity) bounces n_b [-].")
     cfl: float = Field(0.5, gt=0, le=1, description="Hamilton-Jacobi CFL number of the recession sub-steps [-].")
@@ -128,12 +173,12 @@ class GeometryConfig(StrictModel):
     @model_validator(mode="after")
     def _check_resolution(self) -> GeometryConfig:
         spacing = self.domain_size / self.grid_cells
-        if self.initial_wavelength < 4 * spacing:
+        if self.initial_wavelength is not None and self.initial_wavelength < 4 * spacing:
             raise ValueError(
                 f"geometry.initial_wavelength ({self.initial_wavelength} m) must span at least 4 cells "
                 f"({4 * spacing:.4g} m); raise it or raise geometry.grid_cells"
             )
-        if self.initial_wavelength > self.domain_size / 2:
+        if self.initial_wavelength is not None and self.initial_wavelength > self.domain_size / 2:
             raise ValueError(
                 f"geometry.initial_wavelength ({self.initial_wavelength} m) must fit twice in "
                 f"geometry.domain_size ({self.domain_size} m)"

@@ -1,4 +1,4 @@
-"""Recession terms of the growth loop (penitentes.md 3.8, 3.9, 6.1): the upwinded direct beam, the
+"""Recession terms of the growth loop (geometry/DESIGN.md 3.8, 3.9, 6.1): the upwinded direct beam, the
 loss to the sky, the flux-time clock of the linear terms (lambda* = 4 pi D / A_B in a full run), and
 the Lliboutry switch integrated over the wall faces a column stands for."""
 
@@ -61,16 +61,43 @@ def test_flat_ice_keeps_the_absorbed_shortwave_above_the_sky_loss():
 
 
 def test_lab_preset_grows_at_lambda_star():
-    """A and D both run on flux time, so a full sun-path run selects lambda* = 4 pi D / A_B (4.4 cm)."""
+    """V1 from white noise in a full sun-path run: the scattered light and all other absorbed light are
+    spread over the e-folding depth l, so the field selects lambda* = 2 pi l (4.4 cm for l = 7 mm)."""
     cfg = GeometryConfig(**yaml.safe_load((SITES / "lab_micro.yaml").read_text())["geometry"])
     rng = np.random.default_rng(1)
     h0 = ablation.initial_height_field(
         cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
     )
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
-    lambda_star = 4 * np.pi * cfg.diffusivity / cfg.scattered_light_coefficient
+    assert cfg.initial_wavelength is None  # white noise: nothing seeds the answer
+    lambda_star = 2 * np.pi * cfg.optical_efolding_depth
     assert metrics.dominant_wavelength(grown.height, cfg.spacing) == pytest.approx(lambda_star, rel=0.15)
     assert 5 < grown.height.std() / h0.std() < 500  # grows, but stays a lab-sized form
+
+
+@pytest.mark.slow
+def test_lab_onset_scales_with_the_efolding_depth():
+    """V7 in a full sun-path run: doubling l (and the domain, and the days, since sigma* = A_B / (2 l))
+    doubles the wavelength that white noise develops, within 20 %. 256^2 cells over 12 onset
+    wavelengths, so that the spectrum's bins resolve the peak (the preset's 3 do not); ~1 min."""
+    site = yaml.safe_load((SITES / "lab_micro.yaml").read_text())["geometry"]
+    onsets = []
+    for scale in (1, 2):
+        cfg = GeometryConfig(
+            **{
+                **site,
+                "optical_efolding_depth": scale * site["optical_efolding_depth"],
+                "grid_cells": 256,
+                "domain_size": scale * 4 * site["domain_size"],
+                "days": scale * site["days"],
+                "initial_roughness_rms": scale * site["initial_roughness_rms"],
+            }
+        )
+        rng = np.random.default_rng(3)
+        h0 = ablation.initial_height_field(cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, None, rng)
+        grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
+        onsets.append(metrics.dominant_wavelength(grown.height, cfg.spacing))
+    assert onsets[1] / onsets[0] == pytest.approx(2.0, rel=0.2), onsets
 
 
 def test_uniform_latent_heat_leaves_the_recession_as_it_was():

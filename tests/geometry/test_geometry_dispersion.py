@@ -1,4 +1,4 @@
-"""V1 (penitentes.md 7): linear dispersion of the Betterton-type kernel with diffusion.
+"""V1 (geometry/DESIGN.md 7): linear dispersion of the Betterton-type kernel with diffusion.
 
 sigma(k) = A_B |k| - D k^2, lambda* = 4 pi D / A_B = 4.40 cm for A_B = 7.14e-7 m/s, D = 2.5e-9 m2/s.
 The 1-D run uses the real-space quadrature (not the spectral shortcut), so it tests the kernel.
@@ -88,3 +88,38 @@ def test_two_d_growth_is_isotropic():
         grown = ablation.spectral_linear_step(1e-6 * field, spacing, 1000.0, A_B, D, 0.0)
         rate = np.log(np.abs(grown).max() / 1e-6) / 1000.0
         assert rate == pytest.approx(float(ablation.linear_growth_rate(k, A_B, D)), rel=1e-6)
+
+
+# Penetration length (DESIGN.md 3.10, 7 V1 and V7): sigma(k) = A_B |k| / (1 + (k l)^2) peaks at k = 1/l.
+
+
+def _white_noise_onset(efolding_depth: float, seed: int) -> float:
+    """Dominant wavelength [m] of 2-D white noise after five e-folding times of the fastest mode,
+    sigma* = A_B / (2 l), on a 256^2 grid holding 32 onset wavelengths."""
+    n = 256
+    spacing = 32 * 2 * np.pi * efolding_depth / n
+    h = 1e-6 * np.random.default_rng(seed).standard_normal((n, n))
+    h = ablation.spectral_linear_step(h, spacing, 5.0 * 2 * efolding_depth / A_B, A_B, 0.0, 0.0, efolding_depth)
+    return metrics.dominant_wavelength(h, spacing)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_white_noise_peaks_at_two_pi_l(seed):
+    """V1: the onset wavelength is 2 pi l (4.4 cm for l = 7 mm), within 20 %."""
+    efolding_depth = 0.007
+    onset = _white_noise_onset(efolding_depth, seed)
+    assert onset == pytest.approx(ablation.onset_wavelength(efolding_depth), rel=0.2)
+
+
+def test_doubling_l_doubles_the_onset_wavelength():
+    """V7: twice the e-folding depth, twice the onset wavelength, within 20 %."""
+    ratio = _white_noise_onset(0.014, 4) / _white_noise_onset(0.007, 5)
+    assert ratio == pytest.approx(2.0, rel=0.2)
+
+
+def test_growth_rate_peaks_at_one_over_l():
+    efolding_depth = 0.06
+    k = np.linspace(1.0, 100.0, 20000)
+    sigma = ablation.linear_growth_rate(k, A_B, 0.0, 0.0, efolding_depth)
+    assert k[np.argmax(sigma)] == pytest.approx(1.0 / efolding_depth, rel=1e-3)
+    assert sigma.max() == pytest.approx(A_B / (2 * efolding_depth), rel=1e-6)

@@ -1,4 +1,4 @@
-"""V2 radiation checks (penitentes.md 7): flat snow exact, sky-view identities, spherical bowl.
+"""V2 radiation checks (geometry/DESIGN.md 7): flat snow exact, sky-view identities, spherical bowl.
 
 The bowl uses D_c / spacing = 64 (not 128) to stay fast; V_sky is within 1 % there and the
 scattered irradiance within 5 % (the issue's tolerance).

@@ -92,9 +92,17 @@ def test_stage_writes_every_output(tmp_path):
     # V4: any relief darkens the field against flat snow of the same local albedo.
     import json
 
-    m = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
+    written = json.loads((tmp_path / "metrics.json").read_text())
+    m = written["metrics"]
     assert m["field_albedo"] < m["flat_albedo"]
     assert m["albedo_difference"] == pytest.approx(m["field_albedo"] - cfg.albedo)
+    # Issue 18: the spacing is never the domain; the season's history and the aspects are written.
+    assert m["dominant_wavelength_m"] <= cfg.domain_size / 2 + 1e-9
+    history = written["season_history"]
+    assert history["day"] == data["snapshot_days"].tolist()
+    for key in ("crest_spacing_m", "crest_to_trough_m", "crest_density_per_m2"):
+        assert len(history[key]) == len(history["day"])
+    assert sum(written["aspect_histogram"]["fraction"]) == pytest.approx(1.0)
 
 
 def test_stage_is_deterministic(tmp_path):

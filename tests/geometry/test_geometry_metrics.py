@@ -1,4 +1,4 @@
-"""V3 spacing and height metrics (penitentes.md 7) on fields whose answer is known by construction."""
+"""V3 spacing and height metrics (geometry/DESIGN.md 7) on fields whose answer is known by construction."""
 
 import numpy as np
 import pytest
@@ -55,3 +55,19 @@ def test_crest_spacing_counts_the_blades():
     assert metrics.crest_spacing(_rows(profile), SPACING) == pytest.approx(0.5)
     assert metrics.crest_spacing(_rows(np.cos(2 * np.pi * Y / 0.8)), SPACING) == pytest.approx(0.8)
     assert metrics.crest_spacing(np.ones((N, N)), SPACING) == float("inf")
+
+
+def test_crest_density_counts_isolated_peaks():
+    """Peaks every 8 cells both ways (0.5 m x 0.5 m) give 4 crests per m^2; E-W rows of equal height
+    have no strict maxima along them."""
+    x = np.arange(N) * SPACING
+    bumps = np.cos(2 * np.pi * Y / 0.5)[:, None] + np.cos(2 * np.pi * x / 0.5)[None, :]
+    assert metrics.crest_density(bumps, SPACING) == pytest.approx(4.0)
+    assert metrics.crest_density(_rows(np.cos(2 * np.pi * Y / 0.5)), SPACING) == 0.0
+
+
+def test_dominant_wavelength_is_never_the_domain():
+    """A field whose strongest mode is the domain's fundamental has no repeat inside the domain:
+    the answer is the strongest wavelength of L/2 or shorter, here the 0.8 m rows."""
+    h = _rows(1.0 * np.cos(2 * np.pi * Y / L) + 0.3 * np.cos(2 * np.pi * Y / 0.8))
+    assert metrics.dominant_wavelength(h, SPACING) == pytest.approx(0.8, rel=0.05)

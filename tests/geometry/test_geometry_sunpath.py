@@ -1,4 +1,4 @@
-"""V0 sun-path checks (penitentes.md 3.2 and 7) against closed-form values."""
+"""V0 sun-path checks (geometry/DESIGN.md 3.2 and 7) against closed-form values."""
 
 import numpy as np
 import pytest
