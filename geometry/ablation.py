@@ -381,7 +381,7 @@ def grow_field(
     spacing: float,
     settings: GrowthSettings,
     rng: np.random.Generator,
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int], object] | None = None,
 ) -> GrowthResult:
     """Grow a field from ``h0`` over ``settings.days`` days of sun (DESIGN.md section 5)."""
     import time

@@ -28,7 +28,7 @@ def heightfield_solid(h: np.ndarray, spacing: float, base_thickness: float, tile
 
     The grid is tiled ``tiles`` times per side and wrapped so the tile edges repeat the first
     row/column (tiles of the mesh then fit together). Quads split along the diagonal with the
-    smaller height difference, which keeps crests from turning into saw-teeth (penitentes.md 6.4).
+    smaller height difference, which keeps crests from turning into saw-teeth (DESIGN.md 6.4).
     """
     h = np.asarray(h, float)
     if not np.all(np.isfinite(h)):

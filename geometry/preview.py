@@ -57,6 +57,7 @@ def save_metrics_plot(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.ticker
+    from matplotlib.projections.polar import PolarAxes
 
     fig = plt.figure(figsize=(11, 8))
     ax = fig.add_subplot(2, 2, 1)
@@ -84,10 +85,13 @@ def save_metrics_plot(
     ax.set_title(
         f"power spectrum: λ_dom / H = {summary['spacing_to_height']:.2f} (H {summary['crest_to_trough_m']:.2f} m)"
     )
-    ax = fig.add_subplot(2, 2, 3, projection="polar")
+    polar = fig.add_subplot(2, 2, 3, projection="polar")
+    if not isinstance(polar, PolarAxes):  # matplotlib types add_subplot as returning plain Axes
+        raise TypeError("matplotlib did not make a polar axes")
     edges, frac = metrics.aspect_histogram(h, spacing)
-    ax.set_theta_zero_location("N")
-    ax.set_theta_direction(-1)
+    polar.set_theta_zero_location("N")
+    polar.set_theta_direction(-1)
+    ax = polar
     ax.bar(np.radians(edges[:-1] + 5), frac, width=np.radians(10), alpha=0.7)
     ax.set_title("aspect of steep (>30°) facets", pad=15)
     ax = fig.add_subplot(2, 2, 4)
@@ -116,8 +120,8 @@ def render_preview(path: Path, mesh: TriangleMesh, sun: np.ndarray, width_px: in
     size = max(bounds[1] - bounds[0], bounds[3] - bounds[2])
     centre = np.array([(bounds[0] + bounds[1]) / 2, (bounds[2] + bounds[3]) / 2, bounds[5]])
     sun = np.asarray(sun, float) / np.linalg.norm(sun)
-    plotter = pv.Plotter(off_screen=True, window_size=(width_px, int(width_px * 0.7)), lighting="none")
-    plotter.set_background("#bcd3ea", top="#5d86b5")
+    plotter = pv.Plotter(off_screen=True, window_size=[width_px, int(width_px * 0.7)], lighting="none")
+    plotter.set_background("#bcd3ea", top="#5d86b5")  # type: ignore[arg-type]  # pyvista's wraps() hides the signature
     plotter.add_mesh(surface, color="#f4f7fb", smooth_shading=False, specular=0.1, ambient=0.25, diffuse=0.8)
     plotter.add_light(
         pv.Light(position=tuple(centre + sun * size * 10), focal_point=tuple(centre), light_type="scene light")
@@ -125,7 +129,7 @@ def render_preview(path: Path, mesh: TriangleMesh, sun: np.ndarray, width_px: in
     start = centre + sun * size * 0.15
     plotter.add_mesh(pv.Arrow(start=start, direction=sun, scale=size * 0.45), color="orange", ambient=1.0, diffuse=0.0)
     plotter.add_text(title, font_size=10)
-    plotter.add_axes(xlabel="E", ylabel="N", zlabel="up")
+    plotter.add_axes(xlabel="E", ylabel="N", zlabel="up")  # type: ignore[call-arg]  # pyvista's wraps() hides the signature
     # Look from the south-east and above so north-leaning blades show their lean.
     plotter.camera_position = [
         tuple(centre + np.array([0.9, -1.3, 0.9]) * size),
@@ -143,6 +147,7 @@ def save_timelapse(
     """H.264 MP4 of the field growing: hillshade + height colour per snapshot, with the day burned in."""
     import av
     import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -168,7 +173,10 @@ def save_timelapse(
             ax.set_ylabel("y, north [m]")
             fig.set_dpi(dpi)
             fig.canvas.draw()
-            image = np.array(fig.canvas.buffer_rgba())[:, :, :3]  # a copy: the canvas buffer is reused by the next draw
+            canvas = fig.canvas
+            if not isinstance(canvas, FigureCanvasAgg):  # the Agg backend, chosen above
+                raise TypeError("the time-lapse needs matplotlib's Agg backend")
+            image = np.array(canvas.buffer_rgba())[:, :, :3]  # a copy: the canvas buffer is reused by the next draw
             image = image[: image.shape[0] // 2 * 2, : image.shape[1] // 2 * 2]
             frames.append(image)
         stream.width, stream.height = frames[0].shape[1], frames[0].shape[0]

@@ -105,7 +105,7 @@ class GeometryConfig(StrictModel):
         0.06,
         ge=0,
         le=10,
-        description="e-folding depth l of absorbed sunlight, z_e = 1/k_e of snow_optics.md section 5, broadband "
+        description="e-folding depth l of absorbed sunlight, z_e = 1/k_e of render/scene/OPTICS.md §5, broadband "
         "(absorption-weighted: near-infrared mm, visible 0.3-1 m in bubbly ice) [estimate]. Diffuse light spreads "
         "the absorbed energy over l, 1/(1 + (k l)^2) in Fourier space, so the wavelength that grows first is "
         "lambda* = 2 pi l (geometry/DESIGN.md 3.10); 0 = no spreading [m].",
