@@ -3,15 +3,21 @@ run report. relMSE and RMSE are against the Mitsuba steady image and the mitrans
 
 from __future__ import annotations
 
+import csv
+import io
+import logging
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pipeline.atomic import write_text_atomic
+from render.output.agreement import agreement
 from render.output.figures import error_curves
 from render.output.files import RenderOutputs
 from render.output.metrics import mean_radiance, relmse, rmse
+
+log = logging.getLogger(__name__)
 
 COLUMNS = [
     "renderer",
@@ -24,6 +30,7 @@ COLUMNS = [
     "mean_g",
     "mean_b",
     "peak_memory_mib",
+    "agreement",
 ]
 
 
@@ -40,10 +47,16 @@ def _row(renderer, quantity, seconds, count, image, reference, memory) -> dict[s
         "peak_memory_mib": memory,
         "relmse": None,
         "rmse": None,
+        "agreement": None,
+        "disagrees": False,
     }
     if reference is not None and reference.shape == image.shape:
         row["relmse"] = relmse(image, reference)
         row["rmse"] = rmse(image, reference)
+        verdict = agreement(image, reference)
+        row["agreement"], row["disagrees"] = verdict.text(), verdict.disagrees
+        if verdict.disagrees:
+            log.warning("compare: %s %s %s", renderer, quantity, verdict.text())
     return row
 
 
@@ -57,10 +70,16 @@ def _fmt(value) -> str:
 
 def write_table(rows: list[dict[str, Any]], out_dir: Path, stem: str = "comparison") -> None:
     md = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-    md += ["| " + " | ".join(_fmt(r[c]) for c in COLUMNS) + " |" for r in rows]
+    md += [
+        "| " + " | ".join(f"**{_fmt(r[c])}**" if r.get("disagrees") else _fmt(r[c]) for c in COLUMNS) + " |"
+        for r in rows
+    ]
     write_text_atomic(out_dir / f"{stem}.md", "\n".join(md) + "\n")
-    csv = [",".join(COLUMNS)] + [",".join("" if r[c] is None else str(r[c]) for c in COLUMNS) for r in rows]
-    write_text_atomic(out_dir / f"{stem}.csv", "\n".join(csv) + "\n")
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(COLUMNS)
+    writer.writerows([["" if r[c] is None else r[c] for c in COLUMNS] for r in rows])
+    write_text_atomic(out_dir / f"{stem}.csv", buffer.getvalue())
 
 
 def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: Path) -> dict[str, Any]:
@@ -143,6 +162,7 @@ HEADINGS = {
     "mean_g": "mean G",
     "mean_b": "mean B",
     "peak_memory_mib": "peak memory [MiB]",
+    "agreement": "agreement with the reference",
 }
 
 
@@ -181,8 +201,20 @@ def report_lead(rows: list[dict[str, Any]]) -> str:
     import html
 
     items = "".join(f"<li>{html.escape(line)}</li>" for line in key_results(rows))
+    items += "".join(
+        f"<li class='disagrees'>Warning: ours and the reference disagree, {html.escape(r['quantity'])}: "
+        f"{html.escape(r['agreement'])}. The images are not the same light transport; see "
+        "render/core/DESIGN.md §12 (dense media).</li>"
+        for r in rows
+        if r.get("disagrees")
+    )
     head = "".join(f"<th>{html.escape(HEADINGS[c])}</th>" for c in COLUMNS)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r[c]))}</td>" for c in COLUMNS) + "</tr>" for r in rows)
+    body = "".join(
+        ("<tr class='disagrees'>" if r.get("disagrees") else "<tr>")
+        + "".join(f"<td>{html.escape(_fmt(r[c]))}</td>" for c in COLUMNS)
+        + "</tr>"
+        for r in rows
+    )
     caption = (
         "Mean radiance in W m⁻² sr⁻¹ (frames: per bin, summed over the frames' mean); relMSE = mean of "
         "(x − r)² / (r² + 0.01) against Mitsuba volpath (steady) or mitransient (frames); peak memory is the "

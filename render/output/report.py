@@ -30,6 +30,7 @@ table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; }
 td, th { border: 1px solid #bbb; padding: 2px 6px; text-align: right; }
 pre { background: #f5f5f5; padding: 0.5em; overflow-x: auto; font-size: 0.8em; }
 .files { font-size: 0.85em; columns: 3; }
+.disagrees, .disagrees td { background: #fbd5d5; color: #8b0000; font-weight: bold; }
 """
 
 SCRIPT = """

@@ -78,9 +78,9 @@ def _number(value: Any) -> float | None:
     return number if number == number and abs(number) != float("inf") else None
 
 
-def _compare_errors(files: _PointFiles) -> dict[str, float | None]:
+def _compare_errors(files: _PointFiles) -> dict[str, Any]:
     """relMSE of ours (steady, frames) against the point's own reference, from compare/comparison.csv."""
-    errors: dict[str, float | None] = {"relmse_steady": None, "relmse_frames": None}
+    errors: dict[str, Any] = {"relmse_steady": None, "relmse_frames": None, "disagrees_with_reference": None}
     path = files.path("compare", "comparison.csv")
     if path is None:
         return errors
@@ -90,6 +90,11 @@ def _compare_errors(files: _PointFiles) -> dict[str, float | None]:
                 continue
             key = "relmse_steady" if row.get("quantity") == "steady" else "relmse_frames"
             errors[key] = _number(row.get("relmse"))
+            if row.get("agreement"):  # the compare stage's guard (render/output/agreement.py)
+                flagged = row["agreement"].startswith("DISAGREES")
+                errors["disagrees_with_reference"] = bool(errors["disagrees_with_reference"]) or flagged
+    if errors["disagrees_with_reference"]:
+        log.warning("sweep summary: point '%s': ours disagrees with its reference (compare/comparison.md)", files.name)
     return errors
 
 
