@@ -119,16 +119,6 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
             "height_integral_volume_m3": expected,
         }
     )
-    write_json_atomic(
-        out_dir / "metrics.json",
-        {
-            "metrics": summary_metrics,
-            "timings_s": timings,
-            "relief_history_m": (2 * np.sqrt(2) * grown.relief_history).tolist(),
-            "season_history": history,
-            "aspect_histogram": aspects,
-        },
-    )
     timings["metrics_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
