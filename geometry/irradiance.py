@@ -18,6 +18,9 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+# OpenMP first: Debian 12's TBB is older than numba wants, and trying it first only prints a warning.
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+
 
 def check_height_field(h: np.ndarray, name: str = "height field") -> np.ndarray:
     """Return ``h`` as a float array, or raise ValueError if it is not a finite square 2-D grid."""
