@@ -323,9 +323,11 @@ class SceneConfig(StrictModel):
     def _references_exist(self) -> SceneConfig:
         for i, obj in enumerate(self.objects):
             if obj.medium is not None and obj.medium not in self.media:
+                close = difflib.get_close_matches(obj.medium, list(self.media), n=1)
+                hint = f"did you mean '{close[0]}'? " if close else ""
                 raise ValueError(
                     f"objects[{i}] ('{obj.name}') names medium '{obj.medium}', which is not a key of "
-                    f"scene.media ({', '.join(self.media) or 'none defined'})"
+                    f"scene.media; {hint}defined: {', '.join(self.media) or 'none'}"
                 )
         for who, medium in [("camera", self.camera.medium)] + [
             (f"pulse_lights[{i}]", p.medium) for i, p in enumerate(self.pulse_lights)

@@ -64,3 +64,8 @@ def test_set_reaches_list_items():
     assert config.scene.objects[0].name == "penitentes"  # the rest of the list is kept
     with pytest.raises(ConfigError, match=r"'7' is not an item of a list of 2 \(use an index from 0 to 1\)"):
         load_config("configs/demo.yaml", ["scene.objects.7.medium=snow"])
+
+
+def test_a_misspelled_medium_name_gets_a_suggestion():
+    with pytest.raises(ConfigError, match=r"names medium 'snwo'.*did you mean 'snow'\? defined: snow"):
+        load_config("configs/demo.yaml", ["scene.objects.0.medium=snwo"])
