@@ -6,6 +6,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+import numpy as np
+
 from pipeline.atomic import write_json_atomic
 from pipeline.schema.scene import SceneConfig
 from render.scene import optics as optics_mod
@@ -13,6 +15,30 @@ from render.scene.build import build_scene
 from render.scene.model import to_ptpb_core
 
 log = logging.getLogger(__name__)
+
+
+# A cap that leaves more than this fraction of the light still scattering, in an unbounded medium of the
+# same albedo, cuts off light that matters (dense snow scatters hundreds of times before absorption).
+SURVIVING_AT_CAP = 0.05
+
+
+def depth_cap_problems(max_depth: int, media: dict[str, optics_mod.MediumOptics]) -> list[str]:
+    """Warnings for media whose light a finite ``scene.max_depth`` truncates: in an unbounded medium a
+    fraction albedo^max_depth of the paths is still scattering when the cap ends it."""
+    if max_depth < 0:
+        return []
+    problems = []
+    for key, medium in media.items():
+        albedo = float(np.max(optics_mod.derived_quantities(medium).single_scattering_albedo))
+        surviving = albedo ** max(max_depth - 1, 0)
+        if surviving > SURVIVING_AT_CAP:
+            problems.append(
+                f"scene.max_depth={max_depth} truncates light in medium '{key}': with albedo {albedo:.5g}, "
+                f"{surviving:.0%} of its paths would still be scattering at the cap (about "
+                f"{1 / max(1 - albedo, 1e-12):.0f} scatterings before absorption); set scene.max_depth: -1 "
+                "(unbounded, Russian roulette ends paths)"
+            )
+    return problems
 
 
 def run_scene_stage(
@@ -25,6 +51,9 @@ def run_scene_stage(
         key: {"medium": m.to_dict(), "derived": optics_mod.derived_quantities(m).to_dict()} for key, m in media.items()
     }
     write_json_atomic(out_dir / "optics.json", optics_report)
+    for problem in depth_cap_problems(cfg.max_depth, media):
+        log.warning("%s", problem)
+        scene.notes.append(problem)
     core, omitted, approximated = to_ptpb_core(scene)
     for item in omitted:  # the user can act: remove the light, or rely on the reference for it
         log.warning("PTPB scene leaves out %s; the reference renders it", item)

@@ -148,3 +148,15 @@ def test_penitentes_without_a_geometry_mesh_is_a_clear_error(tmp_path):
     cfg = SceneConfig()
     with pytest.raises(FileNotFoundError, match="run the geometry stage first"):
         build_scene(cfg, tmp_path)
+
+
+def test_a_depth_cap_that_truncates_dense_snow_is_named_but_the_demo_is_not():
+    from pipeline.config import load_config
+    from render.scene.stage import depth_cap_problems
+
+    demo = load_config("configs/demo.yaml").scene  # albedo 0.946 at most: 3 % left after 63 scatterings
+    assert depth_cap_problems(demo.max_depth, {"snow": medium_optics(demo.media["snow"], "snow")}) == []
+    dense = medium_optics(MediumConfig(preset="penitente_firn"), "snow")  # albedo 0.9999x
+    (problem,) = depth_cap_problems(64, {"snow": dense})
+    assert problem.startswith("scene.max_depth=64 truncates light in medium 'snow'") and "max_depth: -1" in problem
+    assert depth_cap_problems(-1, {"snow": dense}) == []
