@@ -19,7 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 # OpenMP first: Debian 12's TBB is older than numba wants, and trying it first only prints a warning.
-numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]  # type: ignore[attr-defined]  # set at run time
 
 
 def check_height_field(h: np.ndarray, name: str = "height field") -> np.ndarray:
