@@ -75,7 +75,7 @@ def _resolve_base(name: Any, including_file: Path) -> Path:
     for candidate in candidates:
         if candidate.is_file():
             return candidate.resolve()
-    raise ConfigError(f"{including_file}: extends '{name}', which was found neither next to it nor in {CONFIGS_DIR}")
+    raise ConfigError(f"{including_file}: extends {name!r}, which was found neither next to it nor in {CONFIGS_DIR}")
 
 
 def load_raw(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
@@ -100,7 +100,7 @@ def parse_override(assignment: str) -> tuple[list[str], Any]:
     """Parse ``key.path=value`` (value in YAML syntax) as given to ``--set``."""
     key, sep, value_text = assignment.partition("=")
     if not sep or not key.strip():
-        raise ConfigError(f"override '{assignment}' must look like key.path=value")
+        raise ConfigError(f"override {assignment!r} must look like key.path=value")
     try:
         value = yaml.safe_load(value_text) if value_text.strip() else None
     except yaml.YAMLError:
@@ -111,7 +111,7 @@ def parse_override(assignment: str) -> tuple[list[str], Any]:
 def _list_index(node: list, key: str, assignment: str) -> int:
     if not re.fullmatch(r"-?[0-9]+", key) or not -len(node) <= int(key) < len(node):
         raise ConfigError(
-            f"override '{assignment}': '{key}' is not an item of a list of {len(node)} "
+            f"override {assignment!r}: {key!r} is not an item of a list of {len(node)} "
             f"(use an index from 0 to {len(node) - 1})"
         )
     return int(key)
@@ -136,7 +136,7 @@ def apply_overrides(raw: dict[str, Any], assignments: Iterable[str]) -> dict[str
         elif isinstance(node, dict):
             node[keys[-1]] = value
         else:
-            raise ConfigError(f"override '{assignment}': {'.'.join(keys[:-1])} is a value, not a mapping or a list")
+            raise ConfigError(f"override {assignment!r}: {'.'.join(keys[:-1])} is a value, not a mapping or a list")
     return result
 
 
@@ -185,7 +185,9 @@ def format_validation_error(error: ValidationError, source: str) -> str:
         value_text = repr(value) if not isinstance(value, dict) else "a mapping"
         if len(value_text) > 80:
             value_text = value_text[:77] + "..."
-        lines.append(f"  {key_path}: value {value_text} is not allowed: {item['msg'].removeprefix('Value error, ')}")
+        # One line per problem, whatever the message quotes (a name with a newline in it, say).
+        message = item["msg"].removeprefix("Value error, ").replace("\n", "\\n")
+        lines.append(f"  {key_path}: value {value_text} is not allowed: {message}")
     return "\n".join(lines)
 
 

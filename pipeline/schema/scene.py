@@ -212,7 +212,7 @@ class MediumConfig(StrictModel):
             close = difflib.get_close_matches(name, available, n=1)
             hint = f"did you mean '{close[0]}'? " if close else ""
             raise ValueError(
-                f"unknown optical preset '{name}'; {hint}available: {', '.join(available)} "
+                f"unknown optical preset {name!r}; {hint}available: {', '.join(available)} "
                 "(files in configs/presets/optics/)"
             )
         return name
@@ -326,14 +326,14 @@ class SceneConfig(StrictModel):
                 close = difflib.get_close_matches(obj.medium, list(self.media), n=1)
                 hint = f"did you mean '{close[0]}'? " if close else ""
                 raise ValueError(
-                    f"objects[{i}] ('{obj.name}') names medium '{obj.medium}', which is not a key of "
+                    f"objects[{i}] ('{obj.name}') names medium {obj.medium!r}, which is not a key of "
                     f"scene.media; {hint}defined: {', '.join(self.media) or 'none'}"
                 )
         for who, medium in [("camera", self.camera.medium)] + [
             (f"pulse_lights[{i}]", p.medium) for i, p in enumerate(self.pulse_lights)
         ]:
             if medium is not None and medium not in self.media:
-                raise ValueError(f"{who}.medium '{medium}' is not a key of scene.media")
+                raise ValueError(f"{who}.medium {medium!r} is not a key of scene.media")
         names = [o.name for o in self.objects]
         if len(set(names)) != len(names):
             raise ValueError(f"object names must be unique, got {names}")

@@ -69,3 +69,11 @@ def test_set_reaches_list_items():
 def test_a_misspelled_medium_name_gets_a_suggestion():
     with pytest.raises(ConfigError, match=r"names medium 'snwo'.*did you mean 'snow'\? defined: snow"):
         load_config("configs/demo.yaml", ["scene.objects.0.medium=snwo"])
+
+
+def test_every_problem_stays_on_one_line_even_when_a_name_holds_a_newline():
+    # Found by the config fuzz test: a medium name with a newline split its error over two lines.
+    with pytest.raises(ConfigError) as refused:
+        load_config("configs/demo.yaml", ['scene.pulse_lights=[{"kind": "spot", "medium": "a\\nb"}]'])
+    problems = str(refused.value).splitlines()[1:]
+    assert len(problems) == 1 and problems[0].startswith("  scene: value a mapping is not allowed: ")
