@@ -27,6 +27,12 @@ def config(**kw) -> PTPBConfig:
     return PTPBConfig(**base)
 
 
+def render_stage(scene_dir, cfg: PTPBConfig, out, *, seed: int, threads: int, checkpoint_dir):
+    """The render stage with this test's seed and thread count (a pipeline takes them from the root)."""
+    cfg = cfg.model_copy(update={"seed": seed, "threads": threads})
+    return run_render_stage(scene_dir, cfg, out, quiet=True, checkpoint_dir=checkpoint_dir)
+
+
 def digests(folder) -> dict[str, str]:
     return {name: hashlib.sha256((folder / name).read_bytes()).hexdigest() for name in ("frames.npy", "steady.npy")}
 
@@ -36,22 +42,10 @@ def test_a_render_resumed_from_its_checkpoint_has_the_bytes_of_an_uninterrupted_
     cfg = config(frame_mode=frame_mode)
     checkpoints = scene_dir / "checkpoints"
     # Called without the stage runner, nothing removes the checkpoint of iteration 3 of 6 ...
-    whole = run_render_stage(
-        scene_dir,
-        cfg.model_copy(update={"seed": 1, "threads": 2}),
-        scene_dir / "whole",
-        quiet=True,
-        checkpoint_dir=checkpoints,
-    )
+    whole = render_stage(scene_dir, cfg, scene_dir / "whole", seed=1, threads=2, checkpoint_dir=checkpoints)
     assert (checkpoints / CHECKPOINT_NAME).exists()
     # ... so a second call resumes from it, on another thread count, and renders iterations 4 to 6.
-    resumed = run_render_stage(
-        scene_dir,
-        cfg.model_copy(update={"seed": 1, "threads": 1}),
-        scene_dir / "resumed",
-        quiet=True,
-        checkpoint_dir=checkpoints,
-    )
+    resumed = render_stage(scene_dir, cfg, scene_dir / "resumed", seed=1, threads=1, checkpoint_dir=checkpoints)
     assert digests(scene_dir / "whole") == digests(scene_dir / "resumed")
     for key in ("iterations", "light_paths", "beams", "pair_evaluations", "surface_pairs", "final_radius"):
         assert resumed[key] == whole[key], key
@@ -63,40 +57,16 @@ def test_a_render_resumed_from_its_checkpoint_has_the_bytes_of_an_uninterrupted_
 
 def test_more_iterations_or_threads_continue_the_same_render(scene_dir):
     checkpoints = scene_dir / "checkpoints"
-    run_render_stage(
-        scene_dir,
-        config().model_copy(update={"seed": 1, "threads": 2}),
-        scene_dir / "six",
-        quiet=True,
-        checkpoint_dir=checkpoints,
-    )
+    render_stage(scene_dir, config(), scene_dir / "six", seed=1, threads=2, checkpoint_dir=checkpoints)
     longer = config(iterations=8, checkpoint_every_iterations=0, memory_budget_gib=1.0)
-    run_render_stage(
-        scene_dir,
-        longer.model_copy(update={"seed": 1, "threads": 1}),
-        scene_dir / "resumed",
-        quiet=True,
-        checkpoint_dir=checkpoints,
-    )
-    run_render_stage(
-        scene_dir,
-        longer.model_copy(update={"seed": 1, "threads": 2}),
-        scene_dir / "fresh",
-        quiet=True,
-        checkpoint_dir=scene_dir / "none",
-    )
+    render_stage(scene_dir, longer, scene_dir / "resumed", seed=1, threads=1, checkpoint_dir=checkpoints)
+    render_stage(scene_dir, longer, scene_dir / "fresh", seed=1, threads=2, checkpoint_dir=scene_dir / "none")
     assert digests(scene_dir / "resumed") == digests(scene_dir / "fresh")
 
 
 def test_a_checkpoint_of_other_settings_or_another_scene_is_refused_naming_what_changed(scene_dir):
     checkpoints = scene_dir / "checkpoints"
-    run_render_stage(
-        scene_dir,
-        config().model_copy(update={"seed": 1, "threads": 2}),
-        scene_dir / "a",
-        quiet=True,
-        checkpoint_dir=checkpoints,
-    )
+    render_stage(scene_dir, config(), scene_dir / "a", seed=1, threads=2, checkpoint_dir=checkpoints)
     for cfg, seed, changed in [
         (config(alpha=0.7), 1, r"alpha \(default\) -> 0.7"),
         (config(), 2, "seed 1 -> 2"),
@@ -104,24 +74,12 @@ def test_a_checkpoint_of_other_settings_or_another_scene_is_refused_naming_what_
         (config(frame_mode="gate"), 1, "frame_mode 'bins' -> 'gate'"),
     ]:
         with pytest.raises(ValueError, match=f"other settings .*{changed}.*run without --resume"):
-            run_render_stage(
-                scene_dir,
-                cfg.model_copy(update={"seed": seed, "threads": 2}),
-                scene_dir / "b",
-                quiet=True,
-                checkpoint_dir=checkpoints,
-            )
+            render_stage(scene_dir, cfg, scene_dir / "b", seed=seed, threads=2, checkpoint_dir=checkpoints)
     scene = json.loads((scene_dir / "ptpb_scene.json").read_text())
     scene["media"][0]["g"] = 0.6
     (scene_dir / "ptpb_scene.json").write_text(json.dumps(scene))
     with pytest.raises(ValueError, match="the scene .* changed"):
-        run_render_stage(
-            scene_dir,
-            config().model_copy(update={"seed": 1, "threads": 2}),
-            scene_dir / "b",
-            quiet=True,
-            checkpoint_dir=checkpoints,
-        )
+        render_stage(scene_dir, config(), scene_dir / "b", seed=1, threads=2, checkpoint_dir=checkpoints)
     assert not (scene_dir / "b").exists()  # refused before anything was rendered or written
 
 
@@ -130,10 +88,4 @@ def test_a_damaged_checkpoint_is_refused(scene_dir):
     checkpoints.mkdir()
     (checkpoints / CHECKPOINT_NAME).write_bytes(b"PK\x03\x04 not really a zip file")
     with pytest.raises(ValueError, match="cannot read the checkpoint"):
-        run_render_stage(
-            scene_dir,
-            config().model_copy(update={"seed": 1, "threads": 2}),
-            scene_dir / "a",
-            quiet=True,
-            checkpoint_dir=checkpoints,
-        )
+        render_stage(scene_dir, config(), scene_dir / "a", seed=1, threads=2, checkpoint_dir=checkpoints)
