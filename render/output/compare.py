@@ -109,32 +109,14 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: 
                 ours_memory,
             )
         )
-    if steady_ref is not None:
-        steady_t = ref_timing.get("steady", {})
-        rows.append(
-            _row(
-                "Mitsuba volpath",
-                "steady",
-                steady_t.get("seconds"),
-                steady_t.get("spp"),
-                steady_ref,
-                None,
-                steady_t.get("peak_memory_mib"),
-            )
-        )
-    if frames_ref is not None:
-        transient_t = ref_timing.get("transient", {})
-        rows.append(
-            _row(
-                "mitransient",
-                "frames (bins)",
-                transient_t.get("seconds"),
-                transient_t.get("spp"),
-                frames_ref,
-                None,
-                transient_t.get("peak_memory_mib"),
-            )
-        )
+    for renderer, quantity, image, part in (
+        ("Mitsuba volpath", "steady", steady_ref, "steady"),
+        ("mitransient", "frames (bins)", frames_ref, "transient"),
+    ):
+        if image is not None:
+            timing = ref_timing.get(part) or {}
+            memory = timing.get("peak_memory_mib")
+            rows.append(_row(renderer, quantity, timing.get("seconds"), timing.get("spp"), image, None, memory))
     if not rows:
         raise FileNotFoundError("compare found neither our render nor a reference to tabulate")
     write_table(rows, out_dir)
