@@ -18,8 +18,6 @@ import difflib
 import hashlib
 import json
 import re
-import types
-import typing
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -147,26 +145,17 @@ def format_key_path(parts) -> str:
 
 
 def _known_keys(loc: tuple) -> list[str]:
-    """The keys the schema allows at ``loc`` (a pydantic error location), for "did you mean"."""
-    from pydantic import BaseModel
+    """The keys the schema allows at ``loc`` (a pydantic error location), for "did you mean": the
+    children of ``loc`` in the config reference, whose ``<id>`` and ``<i>`` match any name and index."""
+    from pipeline.reference import entries, key_pattern
 
-    from pipeline.schema import Config
-
-    model: Any = Config
-    for part in loc:
-        if isinstance(model, type) and issubclass(model, BaseModel):
-            field = model.model_fields.get(str(part))
-            if field is None:
-                return []
-            model = field.annotation
-        else:  # a list item or a mapping value: step into the element type
-            args = [a for a in typing.get_args(model) if a is not type(None)]
-            model = args[-1] if args else None
-        while typing.get_origin(model) in (typing.Union, types.UnionType):  # Optional[...]
-            model = next((a for a in typing.get_args(model) if a is not type(None)), None)
-    if isinstance(model, type) and issubclass(model, BaseModel):
-        return list(model.model_fields)
-    return []
+    parent = ".".join(str(part) for part in loc)
+    known = []
+    for entry in entries():
+        head, _, child = entry.key.rpartition(".")
+        if child not in ("<id>", "<i>") and re.fullmatch(key_pattern(head), parent):
+            known.append(child)
+    return known
 
 
 def format_validation_error(error: ValidationError, source: str) -> str:

@@ -8,6 +8,7 @@ Units come from the ``[unit]`` that every field description carries.
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 import types
@@ -87,7 +88,8 @@ def _nested_models(annotation: Any) -> list[tuple[str, type[BaseModel]]]:
     return []
 
 
-def entries(model: type[BaseModel] | None = None, prefix: str = "") -> list[KeyEntry]:
+@functools.cache
+def entries(model: type[BaseModel] | None = None, prefix: str = "") -> tuple[KeyEntry, ...]:
     """Every key of ``model`` (the whole config by default), depth first in declaration order."""
     if model is None:
         from pipeline.schema import Config
@@ -104,7 +106,7 @@ def entries(model: type[BaseModel] | None = None, prefix: str = "") -> list[KeyE
         )
         for suffix, nested in _nested_models(field.annotation):
             out.extend(entries(nested, f"{key}{suffix}."))
-    return out
+    return tuple(out)
 
 
 def _cell(text: str) -> str:
@@ -145,6 +147,11 @@ def markdown() -> str:
     return "\n".join(lines) + "\n"
 
 
+def key_pattern(key: str) -> str:
+    """A regular expression for a reference key: ``<id>`` matches any name, ``<i>`` any index."""
+    return re.escape(key).replace(re.escape("<id>"), r"[^.]+").replace(re.escape("<i>"), r"\d+")
+
+
 def explain(key: str) -> str:
     """One key's entry, or an error that lists the closest keys."""
     import difflib
@@ -154,8 +161,7 @@ def explain(key: str) -> str:
     for pattern_key, entry in by_key.items():  # a medium id in place of <id>, an index in place of <i>
         if found is not None:
             break
-        pattern = re.escape(pattern_key).replace(re.escape("<id>"), r"[^.]+").replace(re.escape("<i>"), r"\d+")
-        if re.fullmatch(pattern, key):
+        if re.fullmatch(key_pattern(pattern_key), key):
             found = entry
     if found is None:
         close = difflib.get_close_matches(key, list(by_key), n=3)
