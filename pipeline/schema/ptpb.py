@@ -91,6 +91,32 @@ class PTPBConfig(StrictModel):
     parallel_guard_sin2: float = Field(
         1e-5, ge=0, lt=1, description="Pairs with sin^2(theta) below this are skipped [-]."
     )
+    medium_estimator: Literal["auto", "beams", "paths"] = Field(
+        "auto",
+        description="Estimator of light scattered in media (render/core/DESIGN.md §12): beams; camera paths with "
+        "next-event estimation; or auto, which in each iteration path-traces a medium whose shortest mean free path "
+        "is below R_i / beam_radius_mfp and keeps beams in the others [-].",
+    )
+    beam_radius_mfp: float = Field(
+        0.1,
+        gt=0,
+        description="With medium_estimator auto, a medium keeps beams while R_i is at most this many of its mean free "
+        "paths; beams are biased low by about 0.2 R_i sigma_t near lit faces (render/core/DESIGN.md §12) [-].",
+    )
+    dense_optical_radius: float = Field(
+        50.0,
+        gt=0,
+        description="With medium_estimator auto, a medium whose largest sigma_t times the scene's bounding radius "
+        "exceeds this is path-traced at any radius: its light paths make hundreds of collisions and its beams are "
+        "a few mean free paths long, too short to share between pixels (render/core/DESIGN.md §12) [-].",
+    )
+    path_max_survival: float = Field(
+        0.999,
+        gt=0,
+        lt=1,
+        description="Russian roulette of path-traced camera paths keeps a path with min(this, throughput); dense, "
+        "high-albedo media need values near 1 so that paths of hundreds of collisions are not cut (DESIGN.md §12) [-].",
+    )
     # In a pipeline config the next four come from scene.max_depth, scene.rr_depth and the root's seed and
     # threads (pipeline/schema/__init__.py refuses them here); they are fields for direct use of the API.
     max_depth: int = Field(

@@ -98,6 +98,7 @@ def test_steady_cube_mean_and_convergence_against_mitsuba_volpath():
         "max_depth": MAXD,
         "rr_depth": 5,
         "threads": 2,
+        "medium_estimator": "beams",
         "snapshot_every": 8,
     }
     runs = [render(cube_scene("steady", res=RES), {**settings, "seed": seed}) for seed in range(12, 18)]
@@ -153,6 +154,7 @@ def test_transient_bins_match_mitransient_frame_by_frame():
         "max_depth": MAXD,
         "rr_depth": 5,
         "threads": 2,
+        "medium_estimator": "beams",
     }
     profiles = np.array(
         [render(scene, {**settings, "seed": seed}).frames.mean(axis=(1, 2, 3)) for seed in range(31, 47)]
@@ -261,6 +263,7 @@ def test_dielectric_ice_slab_matches_mitsuba_volpath(tmp_path):
         "max_depth": MAXD,
         "rr_depth": 5,
         "threads": 2,
+        "medium_estimator": "beams",
     }
     ours = np.mean([render(ice_slab_scene(RES), {**settings, "seed": seed}).steady for seed in (21, 22)], axis=0)
     # Both images hold the slab's scattered glow and the light seen through refraction and reflection.

@@ -65,6 +65,7 @@ def cube_scene(mode: str = "bins", res: int = 24) -> dict:
 
 def settings(**kw) -> dict:
     base = {
+        "medium_estimator": "beams",  # these tests check the beam estimator (render/core/DESIGN.md §12)
         "iterations": 4,
         "light_paths_per_iteration": 4000,
         "initial_beam_radius": 0.03,

@@ -60,6 +60,7 @@ def scene(
 
 def settings(**kw) -> dict:
     base = {
+        "medium_estimator": "beams",  # these tests check the beam estimator (render/core/DESIGN.md §12)
         "iterations": 8,
         "light_paths_per_iteration": 200000,
         "initial_beam_radius": 0.05,

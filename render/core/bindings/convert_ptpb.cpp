@@ -120,6 +120,9 @@ void for_each_stat(Stats& s, Visit&& visit) {
   visit("time_surface_build_s", s.time_surface_build_s);
   visit("final_surface_radius", s.final_surface_radius);
   visit("final_surface_time_half_width", s.final_surface_time_half_width);
+  visit("path_vertices", s.path_vertices);
+  visit("path_connections", s.path_connections);
+  visit("path_media", s.path_media);
 }
 
 RenderStats parse_stats(const py::dict& d) {
@@ -259,6 +262,13 @@ RenderSettings parse_settings(const py::dict& d) {
   s.query_beam_kind = choose<BeamKind>(get<std::string>(d, "query_beam_kind", "long", w),
                                        {{"long", BeamKind::Long}, {"short", BeamKind::Short}}, "query_beam_kind");
   s.parallel_guard_sin2 = get<double>(d, "parallel_guard_sin2", s.parallel_guard_sin2, w);
+  s.medium_estimator = choose<MediumEstimator>(
+      get<std::string>(d, "medium_estimator", "auto", w),
+      {{"auto", MediumEstimator::Auto}, {"beams", MediumEstimator::Beams}, {"paths", MediumEstimator::Paths}},
+      "medium_estimator");
+  s.beam_radius_mfp = get<double>(d, "beam_radius_mfp", s.beam_radius_mfp, w);
+  s.dense_optical_radius = get<double>(d, "dense_optical_radius", s.dense_optical_radius, w);
+  s.path_max_survival = get<double>(d, "path_max_survival", s.path_max_survival, w);
   s.max_depth = get<int>(d, "max_depth", s.max_depth, w);
   s.rr_depth = get<int>(d, "rr_depth", s.rr_depth, w);
   s.seed = get<std::uint64_t>(d, "seed", 0, w);

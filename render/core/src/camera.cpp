@@ -9,6 +9,7 @@
 
 #include "ptpb/free_flight.hpp"
 #include "ptpb/gather.hpp"
+#include "ptpb/path_tracer.hpp"
 #include "ptpb/rng.hpp"
 #include "ptpb/sampling.hpp"
 
@@ -59,7 +60,28 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
   for (int guard = 0; guard < 100000; ++guard) {
     const SurfaceHit hit = cs.intersect(pos, dir);
     const double dist = hit.valid ? hit.t : std::numeric_limits<double>::infinity();
-    if (cs.scattering(medium)) {
+    if (cs.scattering(medium) && (*p.path_media)[medium]) {
+      // A medium where beams would be biased: sample a free flight; a scattering there hands the
+      // path to the path tracer (§12), which estimates the whole rest of it.
+      const Medium& m = scene.media[medium];
+      const Vec3d sigma_t = m.sigma_t();
+      const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
+      const double s = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel]
+                                            : std::numeric_limits<double>::infinity();
+      if (s < dist) {
+        PathStart start;
+        start.position = pos + dir * s;
+        start.incoming = dir;
+        start.medium = medium;
+        start.weight = weight * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
+        start.tau = tau_c + m.ior * s;
+        start.interactions = depth_c + 1;
+        trace_path(p, splat, rng, start, ts);
+        return;
+      }
+      if (!hit.valid) return;
+      weight = weight * transmittance(sigma_t, dist) / survival_mixture(sigma_t, dist);
+    } else if (cs.scattering(medium)) {
       const Vec3d sigma_t = scene.media[medium].sigma_t();
       double t_q;
       bool stop_inside = false;

@@ -60,6 +60,7 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
     require(finite_nonneg(s.radiance), where + ".radiance must be finite and >= 0");
     if (s.kind == SurfaceKind::Diffuse) {
       require(finite_nonneg(s.albedo) && max_component(s.albedo) <= 1.0, where + ".albedo must lie in [0, 1]");
+      if (max_component(s.albedo) > 0) has_diffuse_reflectors_ = true;
     }
     rays_.add_mesh(s.vertices.data(), s.vertices.size() / 3, s.faces.data(), s.faces.size() / 3,
                    static_cast<std::uint32_t>(mesh_id));
@@ -122,6 +123,13 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
     total_power_ += e.power;
     light_cdf_.push_back(total_power_);
   }
+  area_light_pick_.assign(scene.shapes.size(), 0.0);
+  if (total_power_ > 0) {
+    for (const LightEntry& e : lights_) {
+      if (e.kind == 1) area_light_pick_[e.index] = e.power / total_power_;
+      if (e.kind == 3) sky_pick_ = e.power / total_power_;
+    }
+  }
   const Camera& cam = scene.camera;
   require(cam.width > 0 && cam.height > 0, "camera width and height must be > 0");
   require(cam.fov_deg > 0 && cam.fov_deg < 180, "camera fov must lie in (0, 180) degrees");
@@ -140,9 +148,9 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
   }
 }
 
-SurfaceHit CompiledScene::intersect(const Vec3d& origin, const Vec3d& direction) const {
+SurfaceHit CompiledScene::intersect(const Vec3d& origin, const Vec3d& direction, bool from_medium) const {
   SurfaceHit out;
-  const Hit h = rays_.intersect(Vec3f(origin), Vec3f(direction), static_cast<float>(ray_epsilon_));
+  const Hit h = rays_.intersect(Vec3f(origin), Vec3f(direction), from_medium ? 0.0f : static_cast<float>(ray_epsilon_));
   if (!h.valid()) return out;
   out.valid = true;
   out.t = h.t;
@@ -154,6 +162,18 @@ SurfaceHit CompiledScene::intersect(const Vec3d& origin, const Vec3d& direction)
   out.medium_before = out.entering ? s.exterior : s.interior;
   out.medium_after = out.entering ? s.interior : s.exterior;
   return out;
+}
+
+void CompiledScene::sample_area_point(std::size_t shape, KeyedRng& rng, Vec3d& point, Vec3d& normal) const {
+  const Shape& s = scene_.shapes[shape];
+  const auto& cdf = triangle_cdf_[shape];
+  const double ta = rng.next_double() * shape_area_[shape];
+  std::size_t f = std::upper_bound(cdf.begin(), cdf.end(), ta) - cdf.begin();
+  f = std::min(f, cdf.size() - 1);
+  const Vec3d a = vertex(s, s.faces[3 * f]), b = vertex(s, s.faces[3 * f + 1]), c = vertex(s, s.faces[3 * f + 2]);
+  const double su = std::sqrt(rng.next_double()), v = rng.next_double();
+  point = a * (1.0 - su) + b * (su * (1.0 - v)) + c * (su * v);
+  normal = normalize(cross(b - a, c - a));
 }
 
 bool CompiledScene::sample_emission(KeyedRng& rng, LightSample& out) const {
@@ -173,14 +193,8 @@ bool CompiledScene::sample_emission(KeyedRng& rng, LightSample& out) const {
     out.medium = l.medium;
   } else if (e.kind == 1) {
     const Shape& s = scene_.shapes[e.index];
-    const auto& cdf = triangle_cdf_[e.index];
-    const double ta = rng.next_double() * shape_area_[e.index];
-    std::size_t f = std::upper_bound(cdf.begin(), cdf.end(), ta) - cdf.begin();
-    f = std::min(f, cdf.size() - 1);
-    const Vec3d a = vertex(s, s.faces[3 * f]), b = vertex(s, s.faces[3 * f + 1]), c = vertex(s, s.faces[3 * f + 2]);
-    const double su = std::sqrt(rng.next_double()), v = rng.next_double();
-    out.origin = a * (1.0 - su) + b * (su * (1.0 - v)) + c * (su * v);
-    const Vec3d normal = normalize(cross(b - a, c - a));
+    Vec3d normal;
+    sample_area_point(e.index, rng, out.origin, normal);
     out.direction = sample_cosine_hemisphere(normal, u1, u2);
     out.power = s.radiance * (kPi * shape_area_[e.index] / pick);
     out.medium = s.exterior;

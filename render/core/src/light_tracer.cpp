@@ -16,7 +16,7 @@
 namespace ptpb {
 
 void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::uint64_t iteration,
-                      std::uint64_t path_index, LightRecords& out) {
+                      std::uint64_t path_index, LightRecords& out, const std::vector<char>& path_media) {
   KeyedRng rng(st.seed, iteration, StreamDomain::LightPath, path_index);
   LightSample ls;
   if (!cs.sample_emission(rng, ls)) return;
@@ -28,11 +28,12 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
   const double beta0_max = max_component(ls.power);
   int medium = ls.medium, depth = 0;
   double tau = 0.0;
+  bool at_vertex = false;  // the ray leaves a scattering vertex inside a medium
   for (int guard = 0; guard < 1000000; ++guard) {
     // A beam or surface photon at light depth d forms paths of depth >= d + 2 (§3; gather.cpp
     // gives the count for photons).
     if (st.max_depth >= 0 && depth + 2 > st.max_depth) return;
-    const SurfaceHit hit = cs.intersect(pos, dir);
+    const SurfaceHit hit = cs.intersect(pos, dir, at_vertex);
     const double dist = hit.valid ? hit.t : inf;
     bool scattered = false;
     double travel = dist;
@@ -46,7 +47,8 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
                                ? std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff))
                                : std::min(s, dist);
       if (!std::isfinite(beam_length)) beam_length = far_length;
-      if (beam_length > 0 && max_component(beta) > 0) {
+      const bool store = path_media.empty() || !path_media[medium];
+      if (store && beam_length > 0 && max_component(beta) > 0) {
         Beam b;
         b.origin = pos;
         b.direction = dir;
@@ -74,6 +76,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
       return;
     }
     tau += cs.ior(medium) * travel;
+    at_vertex = scattered;
     if (scattered) {
       pos = pos + dir * travel;
       ++depth;
@@ -129,7 +132,8 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
 }
 
 void trace_light_paths(const CompiledScene& cs, const RenderSettings& settings, std::uint64_t iteration,
-                       std::vector<Beam>& beams, std::vector<SurfacePhoton>& photons) {
+                       std::vector<Beam>& beams, std::vector<SurfacePhoton>& photons,
+                       const std::vector<char>& path_media) {
   const std::uint64_t M = settings.light_paths_per_iteration;
   constexpr std::size_t kPathChunk = 256;
   constexpr int kChunksPerThread = 16;  // light-path chunks per thread in one group
@@ -146,7 +150,7 @@ void trace_light_paths(const CompiledScene& cs, const RenderSettings& settings, 
       for (std::size_t c = c0; c < c1; ++c) {
         const std::uint64_t end = std::min<std::uint64_t>(M, (g0 + c + 1) * kPathChunk);
         for (std::uint64_t j = (g0 + c) * kPathChunk; j < end; ++j)
-          trace_light_path(cs, settings, iteration, j, chunk_records[c]);
+          trace_light_path(cs, settings, iteration, j, chunk_records[c], path_media);
       }
     });
     if (g0 == 0 && beams.capacity() == 0) {

@@ -20,6 +20,7 @@
 #include "ptpb/film.hpp"
 #include "ptpb/light_tracer.hpp"
 #include "ptpb/parallel.hpp"
+#include "ptpb/path_tracer.hpp"
 #include "ptpb/schedule.hpp"
 #include "ptpb/surface_photons.hpp"
 #include "ptpb/validation.hpp"
@@ -102,9 +103,20 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     double r_s, T_s;
     surface_bandwidths(film.mode, stats.schedule, it, r_s, T_s);
 
+    // 0. Which media path trace in this iteration (§12). Light paths are needed only where they can
+    // leave a record: a beam in a medium that keeps beams, or a photon on a diffuse surface.
+    const std::vector<char> path_media = media_using_paths(cs, settings, R);
+    bool beam_media = false;
+    for (std::size_t m = 0; m < path_media.size(); ++m) beam_media |= cs.scattering(int(m)) && !path_media[m];
+
     // 1. Light paths, in fixed chunks of path indices; beams and photons kept in path order (§9).
     auto t0 = Clock::now();
-    trace_light_paths(cs, settings, static_cast<std::uint64_t>(it), beams, photons);
+    if (beam_media || cs.has_diffuse_reflectors()) {
+      trace_light_paths(cs, settings, static_cast<std::uint64_t>(it), beams, photons, path_media);
+    } else {
+      beams.clear();
+      photons.clear();
+    }
     // Beams in space order (a deterministic function of the path-ordered beams): the structure's
     // leaves and the gather then read neighbouring records.
     sort_beams_spatially(beams, settings.threads);
@@ -129,6 +141,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     pass.time_half_width = T;
     pass.photons = &photons;
     pass.photon_grid = &photon_grid;
+    pass.path_media = &path_media;
     pass.surface_radius = photon_grid.radius();
     pass.surface_time_half_width = T_s;
     // Tiles add straight into the sums, so a pass is never left half done: a cancel that arrives
@@ -161,6 +174,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     stats.beams += beams.size();
     stats.accel_references += accel->references();
     stats.final_radius = R;
+    stats.path_media = int(std::count(path_media.begin(), path_media.end(), char(1)));
     stats.final_time_half_width = T;
     stats.surface_photons += photons.size();
     stats.final_surface_radius = photon_grid.radius();

@@ -47,6 +47,9 @@ void validate_settings(const RenderSettings& s) {
   require(s.parallel_guard_sin2 >= 0 && s.parallel_guard_sin2 < 1, "parallel_guard_sin2 must lie in [0, 1)");
   require(s.max_depth == -1 || s.max_depth >= 1, "max_depth must be -1 or >= 1");
   require(s.rr_depth >= 1, "rr_depth must be >= 1");
+  require(std::isfinite(s.beam_radius_mfp) && s.beam_radius_mfp > 0, "beam_radius_mfp must be > 0");
+  require(s.dense_optical_radius > 0, "dense_optical_radius must be > 0");
+  require(s.path_max_survival > 0 && s.path_max_survival < 1, "path_max_survival must lie in (0, 1)");
   require(s.threads >= 0, "threads must be >= 0");
   require(s.tile_size >= 1, "tile_size must be >= 1");
   require(s.snapshot_every >= 0, "snapshot_every must be >= 0");

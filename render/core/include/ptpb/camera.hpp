@@ -31,6 +31,7 @@ struct CameraPass {
   const BeamAccel* accel;
   const std::vector<SurfacePhoton>* photons;
   const SurfacePhotonGrid* photon_grid;
+  const std::vector<char>* path_media;  // per medium: 1 where camera paths are path traced (§12)
   std::uint64_t iteration;
   double radius, time_half_width, inv_paths;
   double surface_radius, surface_time_half_width;
@@ -42,6 +43,7 @@ struct CameraPass {
 struct TileStats {
   std::uint64_t queries = 0, candidates = 0, pairs = 0, parallel = 0, false_positives = 0;
   std::uint64_t surface_queries = 0, surface_pairs = 0;
+  std::uint64_t path_vertices = 0, path_connections = 0;
 
   // Integer totals: the order in which tiles add them does not matter.
   void add_to(RenderStats& s) const {
@@ -52,6 +54,8 @@ struct TileStats {
     s.false_positives += false_positives;
     s.surface_queries += surface_queries;
     s.surface_pairs += surface_pairs;
+    s.path_vertices += path_vertices;
+    s.path_connections += path_connections;
   }
 };
 

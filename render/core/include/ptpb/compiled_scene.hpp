@@ -22,6 +22,17 @@ struct SurfaceHit {
   int medium_after = kVacuum;   // medium on the far side
 };
 
+// A connection from a shading point x to one light, made by next-event estimation (DESIGN.md §12):
+// what arrives at x from the light along -direction, already through every index-matched boundary
+// and medium on the way, divided by the probability of having chosen this connection.
+struct LightConnection {
+  Vec3d direction{};   // unit, from x towards the light
+  Vec3d value{};       // radiance × transmittance (irradiance for the sun, I/d^2 for a point) / pdf
+  double pdf = 0.0;    // solid-angle pdf of the direction, light choice included; 0 for delta lights
+  double tau = 0.0;    // OPL from the light's emission to x (DESIGN.md §1); unused when timeless
+  bool timeless = false;
+};
+
 struct LightSample {
   Vec3d origin{}, direction{};
   Vec3d power{};  // beta_0 divided by the light-selection probability, W
@@ -34,7 +45,10 @@ class CompiledScene {
   explicit CompiledScene(const Scene& scene);  // throws std::invalid_argument on bad input
 
   const Scene& scene() const { return scene_; }
-  SurfaceHit intersect(const Vec3d& origin, const Vec3d& direction) const;
+  // The first surface along the ray. Rays leaving a surface skip ray_epsilon() to avoid finding it
+  // again; rays leaving a scattering vertex inside a medium (`from_medium`) skip nothing, since in a
+  // dense medium a vertex closer than the epsilon to a face is common and must still see it (§12).
+  SurfaceHit intersect(const Vec3d& origin, const Vec3d& direction, bool from_medium = false) const;
   double ior(int medium) const { return medium == kVacuum ? scene_.ambient_ior : scene_.media[medium].ior; }
   bool scattering(int medium) const { return medium != kVacuum && has_scattering_[medium]; }
   bool attenuating(int medium) const { return medium != kVacuum && has_extinction_[medium]; }
@@ -42,6 +56,18 @@ class CompiledScene {
   // Starts one light path: picks a light by power and samples its emission (DESIGN.md §3).
   bool sample_emission(KeyedRng& rng, LightSample& out) const;
   double total_light_power() const { return total_power_; }
+
+  // Next-event estimation from x in `medium` (direct_light.cpp): picks a light by power, samples a
+  // point or direction on it and traces the shadow ray through index-matched boundaries. Returns
+  // false when the connection carries nothing (blocked, back side, black light).
+  // `from_medium`: x is a scattering vertex inside `medium` (see intersect).
+  bool connect_light(KeyedRng& rng, const Vec3d& x, int medium, bool from_medium, LightConnection& out) const;
+  // Solid-angle pdf with which connect_light picks a direction that reaches the emitter shape
+  // `shape` at distance `distance` with cosine `cos_light` on the emitter, or the sky (for MIS).
+  double area_light_pdf(std::uint32_t shape, double distance, double cos_light) const;
+  double sky_light_pdf() const;
+  // True when some surface is diffuse with a non-zero albedo (surface photons have somewhere to land).
+  bool has_diffuse_reflectors() const { return has_diffuse_reflectors_; }
   double ray_epsilon() const { return ray_epsilon_; }
   Vec3d sphere_center() const { return sphere_center_; }
   double sphere_radius() const { return sphere_radius_; }
@@ -65,6 +91,16 @@ class CompiledScene {
   Vec3d sphere_center_{};
   double sphere_radius_ = 0.0;
   double ray_epsilon_ = 1e-5;
+  bool has_diffuse_reflectors_ = false;
+  std::vector<double> area_light_pick_;  // per shape: probability of picking it as a light (0: none)
+  double sky_pick_ = 0.0;
+
+  void sample_area_point(std::size_t shape, KeyedRng& rng, Vec3d& point, Vec3d& normal) const;
+  // Transmittance from x along dir over `distance` (infinite: to the scene's end) through
+  // index-matched boundaries; 0 when anything else is in the way. Adds the OPL to `opl` and leaves
+  // the end point in `end`.
+  Vec3d shadow_transmittance(Vec3d x, const Vec3d& dir, double distance, int medium, bool from_medium, double& opl,
+                             Vec3d& end) const;
 };
 
 }  // namespace ptpb

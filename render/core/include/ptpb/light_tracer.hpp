@@ -18,14 +18,17 @@ struct LightRecords {
 };
 
 // Traces light path `path_index` of iteration `iteration` and appends its beams and surface
-// photons, each in the order the path made them.
+// photons, each in the order the path made them. Media flagged in `path_media` (DESIGN.md §12) get
+// no beams: the light path crosses them, but camera paths estimate what scatters there. An empty
+// vector means beams in every medium.
 void trace_light_path(const CompiledScene& scene, const RenderSettings& settings, std::uint64_t iteration,
-                      std::uint64_t path_index, LightRecords& out);
+                      std::uint64_t path_index, LightRecords& out, const std::vector<char>& path_media = {});
 
 // Traces the settings.light_paths_per_iteration paths of one iteration into `beams` and `photons`
 // (cleared first), in path order whatever the thread count (§9). The vectors keep their capacity
 // from one iteration to the next.
 void trace_light_paths(const CompiledScene& scene, const RenderSettings& settings, std::uint64_t iteration,
-                       std::vector<Beam>& beams, std::vector<SurfacePhoton>& photons);
+                       std::vector<Beam>& beams, std::vector<SurfacePhoton>& photons,
+                       const std::vector<char>& path_media = {});
 
 }  // namespace ptpb

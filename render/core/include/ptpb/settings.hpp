@@ -9,6 +9,9 @@ namespace ptpb {
 
 enum class BeamKind { Long, Short };
 enum class AccelKind { Grid, Embree };
+// Which estimator a scattering medium gets (DESIGN.md §12): beams, camera paths, or per iteration
+// by its mean free path against the beam radius.
+enum class MediumEstimator { Auto, Beams, Paths };
 
 struct RenderSettings {
   int iterations = 16;                              // upper bound on iterations
@@ -29,6 +32,15 @@ struct RenderSettings {
   BeamKind photon_beam_kind = BeamKind::Long;
   BeamKind query_beam_kind = BeamKind::Long;
   double parallel_guard_sin2 = 1e-5;
+  // Dense media (§12): with Auto, a medium keeps beams in an iteration only while R_i is at most
+  // beam_radius_mfp of its shortest mean free path and it is optically thin at the scene's scale
+  // (max σ_t times the bounding radius at most dense_optical_radius); otherwise camera paths
+  // scattering in it are path traced. Path tracing keeps a path after rr_depth with
+  // min(path_max_survival, throughput).
+  MediumEstimator medium_estimator = MediumEstimator::Auto;
+  double beam_radius_mfp = 0.1;
+  double dense_optical_radius = 50.0;
+  double path_max_survival = 0.999;
   int max_depth = -1;  // Mitsuba meaning; -1 unbounded
   int rr_depth = 5;
   std::uint64_t seed = 0;

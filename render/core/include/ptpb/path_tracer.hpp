@@ -1,0 +1,32 @@
+// Transient path tracing for media where beams are biased (DESIGN.md §12): a camera path that
+// scatters in such a medium is continued from there with next-event estimation to every light,
+// and each contribution is splatted into the frames at its own optical path length.
+#pragma once
+#include <vector>
+
+#include "ptpb/camera.hpp"
+#include "ptpb/rng.hpp"
+
+namespace ptpb {
+
+// The camera path's first interaction in a medium that uses paths, where path tracing takes over.
+struct PathStart {
+  Vec3d position{};  // the scattering vertex
+  Vec3d incoming{};  // the camera path's direction of travel into it
+  int medium = kVacuum;
+  Vec3d weight{};     // camera throughput, the vertex's sampling weight σ_s Tr / p included
+  double tau = 0.0;   // camera OPL from the pinhole to the vertex
+  int interactions = 0;  // non-null interactions on the camera side, this vertex included
+};
+
+// Traces the rest of the camera path from `start` with the pixel's stream `rng` and splats every
+// light it connects to. A camera path handed over here never gathers beams again, so a full path is
+// estimated by exactly one technique: the medium of its first camera-side vertex decides.
+void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathStart& start, TileStats& ts);
+
+// Which media use paths in an iteration with beam radius R (DESIGN.md §12): all with
+// MediumEstimator::Paths, none with Beams, and with Auto those whose shortest mean free path is
+// below R / beam_radius_mfp or below the scene's bounding radius / dense_optical_radius.
+std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSettings& st, double radius);
+
+}  // namespace ptpb

@@ -1,0 +1,203 @@
+// Transient path tracing in dense media (DESIGN.md §12). Unidirectional, with next-event estimation
+// to point, area, sun and sky lights combined with phase/BSDF sampling by the power heuristic where
+// both can make the same path (area lights and the sky seen through index-matched boundaries only).
+#include "ptpb/path_tracer.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "ptpb/free_flight.hpp"
+#include "ptpb/sampling.hpp"
+
+namespace ptpb {
+namespace {
+
+double power_heuristic(double used, double other) {
+  const double a = used * used, b = other * other;
+  return a + b > 0 ? a / (a + b) : 0.0;
+}
+
+// One vertex of the continued path: a scattering event in a medium or a diffuse reflection.
+struct Vertex {
+  Vec3d position{}, incoming{};
+  int medium = kVacuum;  // the medium the outgoing direction enters
+  bool surface = false;
+  Vec3d normal{}, albedo{};  // surface only; the normal faces the side the path came from
+  Vec3d weight{};
+  double tau = 0.0;
+  int interactions = 0;
+};
+
+}  // namespace
+
+std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSettings& st, double radius) {
+  const Scene& scene = cs.scene();
+  std::vector<char> paths(scene.media.size(), 0);
+  for (std::size_t m = 0; m < scene.media.size(); ++m) {
+    if (!cs.scattering(static_cast<int>(m))) continue;
+    if (st.medium_estimator == MediumEstimator::Paths) {
+      paths[m] = 1;
+    } else if (st.medium_estimator == MediumEstimator::Auto) {
+      const double sigma = max_component(scene.media[m].sigma_t());
+      paths[m] = radius * sigma > st.beam_radius_mfp || sigma * cs.sphere_radius() > st.dense_optical_radius;
+    }
+  }
+  return paths;
+}
+
+void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathStart& start, TileStats& ts) {
+  const CompiledScene& cs = *p.cs;
+  const Scene& scene = cs.scene();
+  const RenderSettings& st = *p.st;
+  const double T = p.time_half_width;
+  // camera_unwarp drops the camera leg up to the first vertex, where the estimate is made (§1).
+  const double unwarp = st.camera_unwarp ? start.tau : 0.0;
+  const bool sky = max_component(scene.environment_radiance) > 0;
+  // A path with k non-null interactions has Mitsuba depth k + 1 (§3).
+  auto within_depth = [&](int interactions) { return st.max_depth < 0 || interactions + 1 <= st.max_depth; };
+
+  Vertex v;
+  v.position = start.position;
+  v.incoming = start.incoming;
+  v.medium = start.medium;
+  v.weight = start.weight;
+  v.tau = start.tau;
+  v.interactions = start.interactions;
+  for (int guard = 0; guard < 10000000; ++guard) {
+    if (!within_depth(v.interactions)) return;
+    ++ts.path_vertices;
+    const double g = v.surface ? 0.0 : scene.media[v.medium].g;
+    // 1. Next-event estimation.
+    LightConnection c;
+    if (cs.connect_light(rng, v.position, v.medium, !v.surface, c)) {
+      double f, pdf_scatter;
+      if (v.surface) {
+        const double cosine = dot(c.direction, v.normal);
+        f = cosine > 0 ? cosine / kPi : 0.0;
+        pdf_scatter = f;
+      } else {
+        // Light arrives along -c.direction and leaves towards the camera along -incoming.
+        f = hg_eval(dot(c.direction, v.incoming), g);
+        pdf_scatter = f;
+      }
+      if (f > 0) {
+        const double mis = c.pdf > 0 ? power_heuristic(c.pdf, pdf_scatter) : 1.0;
+        Vec3d value = v.weight * c.value * (f * mis);
+        if (v.surface) value = value * v.albedo;
+        splat.add(v.tau + c.tau - unwarp, value, c.timeless, T);
+        ++ts.path_connections;
+      }
+    }
+    // 2. The next direction: weight f/pdf is 1 for HG and the albedo for Lambert.
+    const double u1 = rng.next_double(), u2 = rng.next_double();
+    Vec3d dir;
+    double pdf_dir;
+    Vec3d weight = v.weight;
+    if (v.surface) {
+      dir = sample_cosine_hemisphere(v.normal, u1, u2);
+      pdf_dir = std::max(0.0, dot(dir, v.normal)) / kPi;
+      weight = weight * v.albedo;
+    } else {
+      dir = hg_sample(v.incoming, g, u1, u2);
+      pdf_dir = hg_eval(dot(dir, v.incoming), g);
+    }
+    int interactions = v.interactions;
+    if (interactions >= st.rr_depth) {
+      const double q = std::min(st.path_max_survival, max_component(weight));
+      if (!(rng.next_double() < q)) return;
+      weight = weight / q;
+    }
+    // 3. Along dir through boundaries to the next vertex, an emitter or the sky.
+    Vec3d pos = v.position;
+    const Vec3d origin = pos;
+    int medium = v.medium;
+    double tau = v.tau;
+    bool null_chain = true;  // only index-matched crossings since the vertex: NEE could make this path
+    bool next = false;
+    for (int hop = 0; hop < 100000 && !next; ++hop) {
+      const SurfaceHit hit = cs.intersect(pos, dir, hop == 0 && !v.surface);
+      const double dist = hit.valid ? hit.t : std::numeric_limits<double>::infinity();
+      if (cs.scattering(medium)) {
+        const Medium& m = scene.media[medium];
+        const Vec3d sigma_t = m.sigma_t();
+        const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
+        const double s = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel]
+                                              : std::numeric_limits<double>::infinity();
+        if (s < dist) {
+          weight = weight * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
+          v = Vertex{};
+          v.position = pos + dir * s;
+          v.incoming = dir;
+          v.medium = medium;
+          v.weight = weight;
+          v.tau = tau + m.ior * s;
+          v.interactions = interactions + 1;
+          next = true;
+          break;
+        }
+        if (!hit.valid) return;
+        weight = weight * transmittance(sigma_t, dist) / survival_mixture(sigma_t, dist);
+      } else if (cs.attenuating(medium) && hit.valid) {
+        weight = weight * transmittance(scene.media[medium].sigma_t(), dist);
+      }
+      if (!hit.valid) {
+        if (sky && within_depth(interactions)) {
+          const double mis = null_chain ? power_heuristic(pdf_dir, cs.sky_light_pdf()) : 1.0;
+          splat.add(0.0, weight * scene.environment_radiance * mis, true, T);
+        }
+        return;
+      }
+      if (!(max_component(weight) > 0)) return;
+      tau += cs.ior(medium) * dist;
+      pos = hit.position;
+      const Shape& shape = scene.shapes[hit.shape];
+      if (shape.is_emitter() && hit.entering && within_depth(interactions)) {
+        double mis = 1.0;
+        if (null_chain)
+          mis = power_heuristic(pdf_dir, cs.area_light_pdf(hit.shape, length(pos - origin), -dot(dir, hit.normal)));
+        splat.add(tau - unwarp, weight * shape.radiance * mis, false, T);
+      }
+      const Vec3d facing = hit.entering ? hit.normal : -hit.normal;
+      if (shape.kind == SurfaceKind::Null) {
+        medium = hit.medium_after;
+        continue;
+      }
+      ++interactions;
+      if (shape.kind == SurfaceKind::Diffuse) {
+        if (!(max_component(shape.albedo) > 0)) return;
+        v = Vertex{};
+        v.position = pos;
+        v.incoming = dir;
+        v.medium = hit.medium_before;
+        v.surface = true;
+        v.normal = facing;
+        v.albedo = shape.albedo;
+        v.weight = weight;
+        v.tau = tau;
+        v.interactions = interactions;
+        next = true;
+        break;
+      }
+      if (!within_depth(interactions)) return;
+      const double n_i = cs.ior(medium), n_t = cs.ior(hit.medium_after);
+      const FresnelResult fr = fresnel_dielectric(-dot(dir, facing), n_i, n_t);
+      if (rng.next_double() < fr.reflectance) {
+        dir = normalize(reflect(dir, facing));
+      } else {
+        dir = refract(dir, facing, n_i, n_t, fr.cos_t);
+        weight = weight * ((n_i / n_t) * (n_i / n_t));  // radiance scaling at refraction (§3)
+        medium = hit.medium_after;
+      }
+      null_chain = false;
+      if (interactions >= st.rr_depth) {
+        const double q = std::min(st.path_max_survival, max_component(weight));
+        if (!(rng.next_double() < q)) return;
+        weight = weight / q;
+      }
+    }
+    if (!next) return;
+  }
+}
+
+}  // namespace ptpb
