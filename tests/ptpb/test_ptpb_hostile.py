@@ -160,7 +160,7 @@ for name, medium in EXTREME_MEDIA.items():
     r = render(scene(medium=medium), settings())
     finite = all(bool(np.isfinite(a).all()) for a in (r.steady, r.frames, r.early, r.late))
     print(json.dumps({{"name": name, "finite": finite, "seconds": time.perf_counter() - t0,
-                      "beams_per_path": r.stats["beams"] / r.stats["light_paths"], "steady_sum": float(r.steady.sum())}}),
+                      "beams_per_path": r.stats["beams"] / max(1, r.stats["light_paths"]), "steady_sum": float(r.steady.sum())}}),
           flush=True)
 """
 

@@ -111,7 +111,8 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
 
     // 1. Light paths, in fixed chunks of path indices; beams and photons kept in path order (§9).
     auto t0 = Clock::now();
-    if (beam_media || cs.has_diffuse_reflectors()) {
+    const bool light_pass = beam_media || cs.has_diffuse_reflectors();
+    if (light_pass) {
       trace_light_paths(cs, settings, static_cast<std::uint64_t>(it), beams, photons, path_media);
     } else {
       beams.clear();
@@ -170,7 +171,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
         });
     stats.time_camera_s += seconds_since(t0);
     stats.iterations_done = int(it + 1);
-    stats.light_paths += M;
+    if (light_pass) stats.light_paths += M;
     stats.beams += beams.size();
     stats.accel_references += accel->references();
     stats.final_radius = R;
