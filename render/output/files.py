@@ -75,11 +75,17 @@ def write_frames(folder: Path, frames: np.ndarray, axis: FrameAxis, **about: Any
     """Write ``frames.npy`` (T, H, W, 3) float32 and its description ``frames.json`` (``about`` adds
     entries, e.g. the renderer and whether the camera leg is in the OPL)."""
     save_npy_atomic(folder / FRAMES, frames)
+    describe_frames(folder, frames.shape, axis, **about)
+
+
+def describe_frames(folder: Path, shape: tuple[int, ...], axis: FrameAxis, **about: Any) -> None:
+    """Write ``frames.json`` for a ``frames.npy`` already in ``folder`` (a windowed or merged render
+    writes its frames to disk as it goes)."""
     description = {
         "file": FRAMES,
         "layout": "(T, H, W, 3) float32, linear RGB, frame k at OPL start_opl_m + (k + 1/2) bin_width_opl_m",
-        "shape": list(frames.shape),
-        **axis.describe(len(frames)),
+        "shape": list(shape),
+        **axis.describe(int(shape[0])),
         **about,
     }
     write_json_atomic(folder / FRAMES_DESCRIPTION, description)
@@ -154,5 +160,6 @@ __all__ = [
     "STEADY",
     "FrameAxis",
     "RenderOutputs",
+    "describe_frames",
     "write_frames",
 ]

@@ -36,6 +36,8 @@ SHARD_SUMS = "sums.npz"
 SHARD_FRAMES = "frames_sum.npy"
 SHARD_DONE = "shard.json"  # written last: a shard folder without it is incomplete
 GIB = float(1 << 30)
+# Renders with fewer pixel-iterations than this skip the calibration (a few minutes on 2 cores at most).
+CALIBRATE_FROM_PIXEL_ITERATIONS = 2e7
 
 
 class SplitError(ValueError):
@@ -212,7 +214,7 @@ def render_shard(
     frames.flush()
     del frames
     with open(staging / SHARD_SUMS, "wb") as handle:
-        np.savez(handle, **sums)
+        np.savez(handle, steady=sums["steady"], early=sums["early"], late=sums["late"])
     record = {
         "index": index,
         "shards": shards,
@@ -299,3 +301,43 @@ def merge_shards(folders: Sequence[str | Path], frames_path: str | Path, *, fram
         (images["late"] / total).astype(np.float32),
         stats,
     )
+
+
+def calibrate(
+    scene: dict, core_settings: dict, windows: Sequence[tuple[int, int]], shards: int = 1
+) -> dict[str, Any] | None:
+    """Time one iteration of the first window at the real size and predict the whole render: wall time
+    (one iteration's time x iterations x windows, split evenly over shards) and peak memory of one pass.
+    None for a short render (below CALIBRATE_FROM_PIXEL_ITERATIONS) or a time-budgeted one. The first
+    iteration has the widest kernels, so the prediction leans high."""
+    from pipeline.memory import PeakMemory
+
+    iterations = int(core_settings.get("iterations", 0))
+    pixels = int(scene["camera"]["width"]) * int(scene["camera"]["height"])
+    if core_settings.get("time_budget_s") or pixels * iterations < CALIBRATE_FROM_PIXEL_ITERATIONS:
+        return None
+    first, count = windows[0]
+    probe = with_window(scene, first, count) if count else scene
+    with PeakMemory() as memory:
+        out = render(probe, {**core_settings, "iterations": 1, "snapshot_every": 0, "checkpoint_every_iterations": 0})
+    per_iteration = float(out.stats["time_total_s"])
+    del out
+    passes = max(1, len([w for w in windows if w[1] > 0]))
+    wall = per_iteration * iterations * passes
+    per_shard = wall / max(1, shards)
+    buffers = window_bytes(scene, core_settings, max(c for _, c in windows)) if windows[0][1] else 0.0
+    summary = (
+        f"calibration: 1 iteration of {count or 'no'} frames at {scene['camera']['width']}x{scene['camera']['height']} "
+        f"took {per_iteration:.1f} s; predicted {wall / 60:.1f} min for {iterations} iterations x {passes} window(s)"
+        + (f", {per_shard / 60:.1f} min per shard on {shards} shards" if shards > 1 else "")
+        + f", peak memory about {memory.peak_mib / 1024:.2f} GiB ({buffers / GIB:.2f} GiB of image buffers a pass)"
+    )
+    return {
+        "seconds_per_iteration": per_iteration,
+        "predicted_wall_s": wall,
+        "predicted_wall_s_per_shard": per_shard,
+        "windows": passes,
+        "predicted_peak_gib": memory.peak_mib / 1024,
+        "image_buffers_gib": buffers / GIB,
+        "summary": summary,
+    }

@@ -114,3 +114,22 @@ def test_shard_ranges_and_refusals():
 
     with pytest.raises(SplitError, match="render.time_budget_s"):
         refuse_time_budget(PTPBConfig(time_budget_s=10))
+
+
+def test_render_stage_windows_over_budget_and_merges_shards(scene_dir, tmp_path):
+    from pipeline.schema.ptpb import PTPBConfig
+    from render.ptpb.stage import run_render_stage
+
+    cfg = PTPBConfig(iterations=4, light_paths_per_iteration=200, snapshot_every=0, threads=2, seed=3)
+    single = run_render_stage(
+        scene_dir, cfg.model_copy(update={"memory_budget_gib": None}), tmp_path / "one", quiet=True
+    )
+    frames = np.load(tmp_path / "one" / "frames.npy")
+    # A budget that holds about a third of the 30 frames: the stage renders windows into frames.npy.
+    tight = cfg.model_copy(update={"memory_budget_gib": 0.16e-3})
+    windowed = run_render_stage(scene_dir, tight, tmp_path / "win", quiet=True)
+    assert len(windowed["windows"]) > 1 and "windows" not in single
+    np.testing.assert_array_equal(np.load(tmp_path / "win" / "frames.npy"), frames)
+    shards = run_render_stage(scene_dir, cfg, tmp_path / "sh", quiet=True, shards=2, shards_dir=tmp_path / "shards")
+    assert shards["shards"] == 2 and shards["iterations"] == 4
+    assert_close(np.load(tmp_path / "sh" / "frames.npy"), frames)
