@@ -131,17 +131,20 @@ class RenderOutputs:
             "run the render or reference stage first"
         )
 
-    def _array(self, name: str) -> np.ndarray | None:
+    def _array(self, name: str, memory_mapped: bool = False) -> np.ndarray | None:
         path = self.folder / name
-        return np.load(path, allow_pickle=False) if path.is_file() else None
+        if not path.is_file():
+            return None
+        return np.load(path, allow_pickle=False, mmap_mode="r" if memory_mapped else None)
 
     def steady(self) -> np.ndarray | None:
         """The steady image (H, W, 3), or None when the stage wrote none."""
         return self._array(STEADY)
 
-    def frames(self) -> np.ndarray | None:
-        """The frames (T, H, W, 3) float32 as written (gate or bins), or None."""
-        return self._array(FRAMES)
+    def frames(self, memory_mapped: bool = False) -> np.ndarray | None:
+        """The frames (T, H, W, 3) float32 as written (gate or bins), or None; ``memory_mapped`` reads them
+        from disk as they are used (a poster or video film larger than memory)."""
+        return self._array(FRAMES, memory_mapped)
 
     def frames_as_bins(self) -> np.ndarray | None:
         """The frames as bin integrals, comparable between renderers."""
