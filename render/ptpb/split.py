@@ -5,8 +5,9 @@ iterations over many machines). Both give the film a single pass would give (ren
 **Windows.** Each pass re-traces the same keyed random streams and keeps only the frames of its window
 [first, first + count) (the film's ``window_first``/``window_count``); early and late stay relative to the
 whole film, and steady, early and late come out the same in every pass, so the first pass's are kept.
-Frames go straight into a disk-backed ``frames.npy`` (``np.lib.format.open_memmap``), so the whole film
-never sits in memory. ``plan_windows`` sizes the windows so that one pass fits the budget.
+Frames go straight into a disk-backed ``frames.npy`` (created by ``np.lib.format.open_memmap``, written
+with plain file writes), so the whole film never sits in memory. ``plan_windows`` sizes the windows so
+that one pass fits the budget.
 
 **Shards.** Shard k of K runs iterations [a_k, b_k) of the global schedule (the bandwidths depend only on
 the iteration index) with ``keep_sums``: the core sums its frames in float64 and returns the undivided
@@ -105,6 +106,22 @@ def refuse_time_budget(cfg: PTPBConfig) -> None:
         )
 
 
+def create_npy(path: Path, shape: tuple[int, ...], dtype: type) -> int:
+    """Create an ``.npy`` of ``shape`` (sparse on disk until written); return the offset of its data."""
+    np.lib.format.open_memmap(path, mode="w+", dtype=dtype, shape=shape).flush()
+    return path.stat().st_size - int(np.prod(shape)) * np.dtype(dtype).itemsize
+
+
+def write_frames_at(path: Path, offset: int, first: int, frames: np.ndarray) -> None:
+    """Write ``frames`` as frames ``first`` on of the ``.npy`` at ``path`` with plain file writes, a frame at a
+    time: unlike a memory map, written pages never count in this process's resident memory."""
+    frame_bytes = int(np.prod(frames.shape[1:])) * frames.dtype.itemsize
+    with open(path, "r+b") as handle:
+        handle.seek(offset + first * frame_bytes)
+        for frame in frames:
+            handle.write(np.ascontiguousarray(frame).data)
+
+
 @dataclass
 class Windowed:
     """What a windowed render leaves besides its frames file."""
@@ -148,16 +165,15 @@ def render_windowed(
     t0 = time.perf_counter()
     first_result: RenderResult | None = None
     with atomic_path(frames_path) as tmp:
-        frames = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
-        for first, count, result in _passes(scene, core_settings, windows, progress):
-            frames[first : first + count] = result.frames
-            frames.flush()
+        offset = create_npy(tmp, shape, np.float32)
+        for first, _count, result in _passes(scene, core_settings, windows, progress):
+            write_frames_at(tmp, offset, first, result.frames)
             if first_result is None:
                 first_result = result
                 first_result.frames = np.empty((0, *shape[1:]), np.float32)
             else:
                 first_result.stats["time_total_s"] += result.stats["time_total_s"]
-        del frames
+            del result
     assert first_result is not None
     first_result.stats["windows"] = [list(w) for w in windows]
     first_result.stats["temporal_bins"] = film.get("temporal_bins", 0)
@@ -200,19 +216,18 @@ def render_shard(
     staging.mkdir(parents=True)
     t0 = time.perf_counter()
     shape = (frame_count(scene), int(scene["camera"]["height"]), int(scene["camera"]["width"]), 3)
-    frames = np.lib.format.open_memmap(staging / SHARD_FRAMES, mode="w+", dtype=np.float64, shape=shape)
+    offset = create_npy(staging / SHARD_FRAMES, shape, np.float64)
     stats: dict[str, Any] = {}
     sums: dict[str, np.ndarray] = {}
     passes = windows if shape[0] else []
     if not passes:  # steady film: one pass, no frames
         out = render(scene, core_settings, progress=progress)
         sums, stats = _shard_sums(out)
-    for first, count, out in _passes(scene, core_settings, passes, progress):
-        frames[first : first + count] = out.frames
+    for first, _count, out in _passes(scene, core_settings, passes, progress):
+        write_frames_at(staging / SHARD_FRAMES, offset, first, out.frames)
         if not sums:
             sums, stats = _shard_sums(out)
-    frames.flush()
-    del frames
+        del out
     with open(staging / SHARD_SUMS, "wb") as handle:
         np.savez(handle, steady=sums["steady"], early=sums["early"], late=sums["late"])
     record = {
@@ -263,19 +278,19 @@ def merge_shards(folders: Sequence[str | Path], frames_path: str | Path, *, fram
         with np.load(Path(folders[k]) / SHARD_SUMS) as z:
             for name in ("steady", "early", "late"):
                 images[name] = images[name] + z[name] if name in images else z[name].astype(np.float64)
-    shard_frames = [np.load(Path(folders[k]) / SHARD_FRAMES, mmap_mode="r") for k in order]
-    shape = shard_frames[0].shape
+    shard_paths = [Path(folders[k]) / SHARD_FRAMES for k in order]
+    shape = np.load(shard_paths[0], mmap_mode="r").shape
     with atomic_path(frames_path) as tmp:
-        frames = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
+        offset = create_npy(tmp, shape, np.float32)
         for start in range(0, shape[0], frames_per_chunk):
             chunk = slice(start, start + frames_per_chunk)
-            acc = np.array(shard_frames[0][chunk], dtype=np.float64)
-            for part in shard_frames[1:]:
-                acc += part[chunk]
-            frames[chunk] = (acc / total).astype(np.float32)
-        frames.flush()
-        del frames
-    del shard_frames
+            acc: np.ndarray | None = None
+            for path in shard_paths:  # mapped a chunk at a time, so mapped pages never add up to the film
+                part = np.load(path, mmap_mode="r")
+                acc = np.array(part[chunk], dtype=np.float64) if acc is None else acc + part[chunk]
+                del part
+            assert acc is not None
+            write_frames_at(tmp, offset, start, (acc / total).astype(np.float32))
     steady_total = float(images["steady"].sum())
     stats = dict(done[order[0]]["stats"])
     stats.update(
