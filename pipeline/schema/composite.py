@@ -62,7 +62,8 @@ class CompositeConfig(StrictModel):
     light_in_flight: bool = Field(
         False,
         description="Also write light_in_flight.mp4 (each frame's light over the dimmed steady image), "
-        "light_in_flight_panel.png (four moments of it in a 2 x 2 panel) and time_of_arrival.png [-].",
+        "light_in_flight_panel.png (four moments of it in a 2 x 2 panel of the still's size), still.png (the steady "
+        "image at full size) and time_of_arrival.png [-].",
     )
     light_in_flight_dim: float = Field(
         0.25, gt=0, le=1, description="Brightness of the steady image under the light in flight [-]."

@@ -126,16 +126,25 @@ def light_in_flight(
 ) -> dict[str, Path]:
     """Each frame's light over the dimmed steady image, as in femto-photography videos: the steady image at
     ``light_in_flight_dim`` of its brightness, the frame's light screened over it with the clip's exposure.
-    Writes light_in_flight.mp4, a 2 x 2 panel of four moments and the time-of-arrival map."""
+    Writes light_in_flight.mp4, a 2 x 2 panel of four moments (the size of the still), still.png (the steady
+    image at full size, unlabelled) and the time-of-arrival map."""
     from render.output.figures import time_of_arrival_map
 
     scale = clip_exposure(frames, cfg)
     background = display_values(steady, exposure_scale(steady, cfg.exposure_percentile), cfg.tone_curve)
     background = background * cfg.light_in_flight_dim
 
+    def screened(k: int) -> np.ndarray:
+        return 1 - (1 - background) * (1 - display_values(frames[k], scale, cfg.tone_curve))
+
     def composed(k: int) -> np.ndarray:
-        light = display_values(frames[k], scale, cfg.tone_curve)
-        return np.round((1 - (1 - background) * (1 - light)) * 255).astype(np.uint8)
+        return np.round(screened(k) * 255).astype(np.uint8)
+
+    def half(k: int) -> np.ndarray:  # a 2 x 2 box average: four moments make a panel of the still's size
+        image = screened(k)
+        height, width = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
+        blocks = image[:height, :width].reshape(height // 2, 2, width // 2, 2, 3)
+        return np.round(blocks.mean(axis=(1, 3)) * 255).astype(np.uint8)
 
     fps = _frame_rate(cfg, film)
     video = _annotated_video(
@@ -144,13 +153,19 @@ def light_in_flight(
     paths = {"light_in_flight": write_mp4(out_dir / "light_in_flight.mp4", video, fps)}
     moments = np.linspace(0, len(frames) - 1, 4).round().astype(int)
     tiles = [
-        annotate(composed(int(k)), [format_time(film.centre(int(k)) - film.start_opl, cfg.time_unit)]) for k in moments
+        annotate(half(int(k)), [format_time(film.centre(int(k)) - film.start_opl, cfg.time_unit)]) for k in moments
     ]
     panel = np.concatenate([np.concatenate(tiles[:2], axis=1), np.concatenate(tiles[2:], axis=1)], axis=0)
     panel_path = out_dir / "light_in_flight_panel.png"
     with atomic_path(panel_path) as tmp:
         Image.fromarray(panel).save(tmp)
     paths["light_in_flight_panel"] = panel_path
+    # The still at the render's full size, without labels: the poster's main image.
+    still_path = out_dir / "still.png"
+    with atomic_path(still_path) as tmp:
+        steady_display = display_values(steady, exposure_scale(steady, cfg.exposure_percentile), cfg.tone_curve)
+        Image.fromarray(np.round(steady_display * 255).astype(np.uint8)).save(tmp)
+    paths["still"] = still_path
     toa = out_dir / "time_of_arrival.png"
     time_of_arrival_map(frames, film.start_opl, film.bin_width_opl, toa, "Time of arrival")
     paths["time_of_arrival"] = toa
