@@ -117,7 +117,11 @@ def run_render_stage(
     windows = plan_windows(core_scene, core_settings, cfg.memory_budget_gib) if frame_count(core_scene) else [(0, 0)]
     if shards > 1 and shards_dir is None:
         raise ValueError("render: shards need a folder for their sums (shards_dir)")
-    plan = calibrate(core_scene, core_settings, windows, shards)
+    shards_left = (
+        shards > 1 and shards_dir is not None and not _all_shards_done(cfg, shards, Path(shards_dir), fingerprint)
+    )
+    # The merge job of a SLURM run finds every shard done: nothing is left to predict.
+    plan = calibrate(core_scene, core_settings, windows, shards) if shards == 1 or shards_left else None
     if plan is not None:
         log.info("render: %s", plan["summary"])
     frames_written = False
@@ -219,6 +223,11 @@ def _shard_done(record: dict | None, fingerprint: dict, iterations: tuple[int, i
         and record.get("fingerprint") == fingerprint
         and (record["first_iteration"], record["end_iteration"]) == tuple(iterations)
     )
+
+
+def _all_shards_done(cfg: PTPBConfig, shards: int, shards_dir: Path, fingerprint: dict) -> bool:
+    ranges = shard_ranges(cfg.iterations, shards)
+    return all(_shard_done(read_shard(shard_folder(shards_dir, k)), fingerprint, ranges[k]) for k in range(shards))
 
 
 def _render_in_shards(

@@ -47,3 +47,32 @@ def test_shards_refuse_a_time_budget_naming_the_keys(tmp_path):
     assert result.returncode == 2
     assert "render.time_budget_s and --shards do not mix" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_shard_jobs_then_the_merge_run_equal_the_plain_run(tmp_path):
+    """What the SLURM workflow does, by hand: the stages before the render, `pipeline shard` per shard (in
+    any order), then `pipeline run --shards K`, which merges; its frames equal a plain run's."""
+    import numpy as np
+    from block_scene import block_config
+
+    render = {"iterations": 6, "light_paths_per_iteration": 400, "snapshot_every": 0, "frame_mode": "gate"}
+    reference = {"steady": False, "transient": False}
+    for name in ("plain", "sharded"):
+        text = block_config(tmp_path / "runs", name=name, seed=2, render=render, reference=reference)
+        (tmp_path / f"{name}.yaml").write_text(text)
+    assert (
+        pipeline("run", "plain.yaml", "--quiet", "--stage", "scene", "--stage", "render", cwd=tmp_path).returncode == 0
+    )
+    assert pipeline("run", "sharded.yaml", "--quiet", "--stage", "scene", cwd=tmp_path).returncode == 0
+    for index in (2, 0, 1):
+        job = pipeline("shard", "sharded.yaml", "--quiet", "--index", str(index), "--shards", "3", cwd=tmp_path)
+        assert job.returncode == 0, job.stderr[-2000:]
+    shards = tmp_path / "runs" / "sharded" / ".render.shards"
+    assert sorted(p.name for p in shards.iterdir()) == ["shard-0", "shard-1", "shard-2"]
+    merge = pipeline("run", "sharded.yaml", "--quiet", "--stage", "render", "--shards", "3", cwd=tmp_path)
+    assert merge.returncode == 0, merge.stderr[-2000:]
+    assert not shards.exists()  # the published render supersedes its shards
+    plain = np.load(tmp_path / "runs" / "plain" / "render" / "frames.npy")
+    merged = np.load(tmp_path / "runs" / "sharded" / "render" / "frames.npy")
+    assert np.count_nonzero(plain) > 0
+    np.testing.assert_allclose(merged, plain, rtol=1e-6, atol=0)
