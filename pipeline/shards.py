@@ -45,7 +45,7 @@ def prepare_shards(config, config_path: Path, overrides: list[str], shards: int,
         "shards": shards,
         "threads": config.threads or 1,
         "prepare_stages": before_render,
-        "prepared": str(base / before_render[-1] / "manifest.json") if before_render else "",
+        "prepared": str(base / "scene" / "manifest.json"),  # the scene stage always runs before the render
         "shards_dir": str(shards_dir(base, "render")),
         "done": str(base / last / "manifest.json"),
     }

@@ -28,15 +28,14 @@ rule all:
 
 rule prepare:
     output:
-        config["prepared"] or f"{config['folder']}/prepared",
+        config["prepared"],
     log:
         f"{config['folder']}/logs/prepare.log",
     params:
         stages=" ".join(f"--stage {s}" for s in config["prepare_stages"]),
-        touch="" if config["prepared"] else f" && touch {config['folder']}/prepared",
     shell:
         "cd {config[workdir]:q} && {config[python]:q} -m pipeline run {config[config]:q} {SETS} --quiet"
-        " {params.stages}{params.touch} > {log:q} 2>&1"
+        " {params.stages} > {log:q} 2>&1"
 
 
 rule shard:

@@ -130,6 +130,8 @@ def run_render_stage(
             result = _render_in_shards(scene, cfg, shards, Path(shards_dir), out_dir / FRAMES, fingerprint, quiet)
             frames_written = True
         elif len(windows) > 1:
+            if cfg.checkpoint_every_iterations or cfg.checkpoint_every_s:
+                log.warning("render: a windowed render takes no checkpoints (each window is its own pass)")
             log.info(
                 "render: %d frames over the memory budget: %d windows %s",
                 frame_count(core_scene),
