@@ -260,9 +260,11 @@ def read_shard(folder: str | Path) -> dict | None:
     return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
 
 
-def merge_shards(folders: Sequence[str | Path], frames_path: str | Path, *, frames_per_chunk: int = 16) -> RenderResult:
+def merge_shards(
+    folders: Sequence[str | Path], frames_path: str | Path, *, chunk_bytes: float = 512 * 2**20
+) -> RenderResult:
     """Add the shards' float64 sums in index order and divide by the total iterations; the frames go
-    to ``frames_path`` (float32, written under a temporary name, a chunk of frames at a time)."""
+    to ``frames_path`` (float32, written under a temporary name, about ``chunk_bytes`` of sums at a time)."""
     records = [read_shard(f) for f in folders]
     missing = [str(f) for f, r in zip(folders, records, strict=True) if r is None]
     if missing:
@@ -280,6 +282,7 @@ def merge_shards(folders: Sequence[str | Path], frames_path: str | Path, *, fram
                 images[name] = images[name] + z[name] if name in images else z[name].astype(np.float64)
     shard_paths = [Path(folders[k]) / SHARD_FRAMES for k in order]
     shape = np.load(shard_paths[0], mmap_mode="r").shape
+    frames_per_chunk = max(1, int(chunk_bytes // (8 * max(1, int(np.prod(shape[1:]))))))
     with atomic_path(frames_path) as tmp:
         offset = create_npy(tmp, shape, np.float32)
         for start in range(0, shape[0], frames_per_chunk):

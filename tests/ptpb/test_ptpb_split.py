@@ -86,7 +86,7 @@ def test_four_shards_merged_equal_the_single_process_render(tmp_path, frame_mode
     folders = [tmp_path / f"shard-{k}" for k in range(4)]
     for k in (2, 0, 3, 1):  # finishing order does not matter
         render_shard(scene, SETTINGS, folders[k], k, 4)
-    merged = merge_shards(folders, tmp_path / "frames.npy")
+    merged = merge_shards(folders, tmp_path / "frames.npy", chunk_bytes=7 * 8 * 360)  # 7 frames a chunk
     assert merged.stats["iterations"] == ITERATIONS
     assert_close(np.asarray(merged.frames), whole.frames)
     for name in ("steady", "early", "late"):
