@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.schema.ptpb import PTPBConfig
 from render.ptpb import render
 from render.ptpb.split import SplitError, merge_shards, plan_windows, render_shard, render_windowed, shard_ranges
 from render.scene.shapes import box_mesh, quad_mesh
@@ -37,7 +38,7 @@ def medium_and_floor_scene(frame_mode: str) -> dict:
     }
 
 
-SETTINGS = {
+SETTINGS: dict = {
     "iterations": ITERATIONS,
     "light_paths_per_iteration": 300,
     "snapshot_every": 0,
@@ -55,14 +56,22 @@ def assert_close(ours: np.ndarray, reference: np.ndarray) -> None:
     assert relative.max() <= 1e-6, f"largest relative difference {relative.max():.3g}"
 
 
+# The medium's estimators: beams, and where the core has it (the dense-media work), the path tracer; every
+# estimator splats through the same film, so windows must join for each.
+ESTIMATORS = ["beams", "paths"] if "medium_estimator" in PTPBConfig.model_fields else [None]
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS)
 @pytest.mark.parametrize("frame_mode", ["bins", "gate"])
-def test_windows_join_into_the_single_pass_film(tmp_path, frame_mode):
+def test_windows_join_into_the_single_pass_film(tmp_path, frame_mode, estimator):
     scene = medium_and_floor_scene(frame_mode)
-    whole = render(scene, SETTINGS)
-    assert whole.stats["surface_pairs"] > 0 and whole.stats["pair_evaluations"] > 0
+    settings = SETTINGS if estimator is None else {**SETTINGS, "medium_estimator": estimator}
+    whole = render(scene, settings)
+    assert whole.stats["surface_pairs"] > 0
+    assert estimator == "paths" or whole.stats["pair_evaluations"] > 0  # the medium's beams were gathered
     windows = [(0, 7), (7, 7), (14, 9), (23, 7)]
-    first = render_windowed(scene, SETTINGS, tmp_path / "a.npy", windows)
-    again = render_windowed(scene, SETTINGS, tmp_path / "b.npy", windows)
+    first = render_windowed(scene, settings, tmp_path / "a.npy", windows)
+    again = render_windowed(scene, settings, tmp_path / "b.npy", windows)
     assert_close(np.asarray(first.result.frames), whole.frames)
     np.testing.assert_array_equal(np.asarray(first.result.frames), np.asarray(again.result.frames))
     for name in ("steady", "early", "late"):
@@ -79,13 +88,15 @@ def test_a_window_keeps_only_its_frames_and_early_late_mean_outside_the_whole_fi
     np.testing.assert_array_equal(window.early, whole.early)
 
 
+@pytest.mark.parametrize("estimator", ESTIMATORS)
 @pytest.mark.parametrize("frame_mode", ["bins", "gate"])
-def test_four_shards_merged_equal_the_single_process_render(tmp_path, frame_mode):
+def test_four_shards_merged_equal_the_single_process_render(tmp_path, frame_mode, estimator):
     scene = medium_and_floor_scene(frame_mode)
-    whole = render(scene, SETTINGS)
+    settings = SETTINGS if estimator is None else {**SETTINGS, "medium_estimator": estimator}
+    whole = render(scene, settings)
     folders = [tmp_path / f"shard-{k}" for k in range(4)]
     for k in (2, 0, 3, 1):  # finishing order does not matter
-        render_shard(scene, SETTINGS, folders[k], k, 4)
+        render_shard(scene, settings, folders[k], k, 4)
     merged = merge_shards(folders, tmp_path / "frames.npy", chunk_bytes=7 * 8 * 360)  # 7 frames a chunk
     assert merged.stats["iterations"] == ITERATIONS
     assert_close(np.asarray(merged.frames), whole.frames)
@@ -109,7 +120,6 @@ def test_shard_ranges_and_refusals():
     assert shard_ranges(10, 4) == [(0, 2), (2, 5), (5, 7), (7, 10)]
     with pytest.raises(SplitError, match="--shards 5 exceeds render.iterations"):
         shard_ranges(4, 5)
-    from pipeline.schema.ptpb import PTPBConfig
     from render.ptpb.split import refuse_time_budget
 
     with pytest.raises(SplitError, match="render.time_budget_s"):
@@ -117,7 +127,6 @@ def test_shard_ranges_and_refusals():
 
 
 def test_render_stage_windows_over_budget_and_merges_shards(scene_dir, tmp_path):
-    from pipeline.schema.ptpb import PTPBConfig
     from render.ptpb.stage import run_render_stage
 
     cfg = PTPBConfig(iterations=4, light_paths_per_iteration=200, snapshot_every=0, threads=2, seed=3)
