@@ -28,7 +28,7 @@ PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find pipeline geometry
 
 CORE_FORMATTED := $(shell find render/core -name '*.cpp' -o -name '*.hpp')
 
-.PHONY: help setup demo lint test test-all test-cpp test-py bench sweep sanitize clean distclean
+.PHONY: help setup demo poster video lint test test-all test-cpp test-py bench sweep sanitize clean distclean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  make %-10s %s\n", $$1, $$2}'
@@ -37,6 +37,17 @@ setup: $(STAMPS)/package ## Install Debian packages and .venv with the package b
 
 demo: setup ## Run the whole pipeline on configs/demo.yaml (CONFIG=... for another)
 	$(PY) -m pipeline run $(CONFIG)
+
+# Assets: the previews by default (640x360, within 15 minutes on 2 cores each); FULL=1 the full configs,
+# PROFILE=slurm (with FULL=1) through the cluster profile in SHARDS shards (default 8).
+ASSET_SUFFIX := $(if $(FULL),,_preview)
+ASSET_ARGS := $(if $(PROFILE),--shards $(or $(SHARDS),8) --profile $(PROFILE),$(if $(SHARDS),--shards $(SHARDS),))
+
+poster: setup ## The poster (3840x2160 still + light-in-flight panel): preview by default; FULL=1, PROFILE=slurm
+	$(PY) -m pipeline run configs/assets/poster$(ASSET_SUFFIX).yaml $(ASSET_ARGS)
+
+video: setup ## The video (1920x1080, 240 frames at 24 fps): preview by default; FULL=1, PROFILE=slurm
+	$(PY) -m pipeline run configs/assets/video$(ASSET_SUFFIX).yaml $(ASSET_ARGS)
 
 lint: setup ## Lint and format checks (ruff, clang-format) and type checks (mypy); make test runs it first
 	$(VENV)/bin/ruff check .

@@ -92,14 +92,46 @@ def run(
         False, "--resume", help="Continue interrupted progressive renders from their last checkpoint."
     ),
     overrides: list[str] | None = SET_OPTION,
+    shards: int = typer.Option(
+        1, "--shards", min=1, help="Split the render's iterations into K shards, merged exactly (float64 sums)."
+    ),
+    profile: str | None = typer.Option(
+        None, "--profile", help="With --shards: run the shards through Snakemake with this profile (default, slurm)."
+    ),
+    cores: str | None = typer.Option(None, "--cores", "-c", help="With --profile: cores for local jobs."),
+    dry_run: bool = typer.Option(False, "--dry-run", "-n", help="With --profile: print the jobs; run nothing."),
 ) -> None:
     """Run the pipeline on CONFIG. Finished stages whose inputs did not change are skipped."""
     setup_logging(quiet)
     cfg = _load_or_exit(config, overrides)
     from pipeline.stages import STAGES
 
+    if shards > 1 and cfg.render.time_budget_s is not None:
+        typer.echo(
+            "error: render.time_budget_s and --shards do not mix (a shard runs a fixed range of render.iterations); "
+            "set render.time_budget_s: null or run without --shards",
+            err=True,
+        )
+        raise typer.Exit(code=2)
+    if shards > cfg.render.iterations:
+        typer.echo(f"error: --shards {shards} exceeds render.iterations = {cfg.render.iterations}", err=True)
+        raise typer.Exit(code=2)
+    if profile is not None or dry_run:
+        from pipeline.shards import run_shards
+        from pipeline.sweep import SweepError
+
+        try:
+            code = run_shards(cfg, config, list(overrides or []), shards, profile, cores, dry_run)
+        except SweepError as exc:
+            typer.echo(f"error: {exc}", err=True)
+            raise typer.Exit(code=2) from None
+        if code != 0:
+            typer.echo(
+                f"error: snakemake failed (exit {code}); logs in {run_dir(cfg) / '.workflow' / 'logs'}/", err=True
+            )
+        raise typer.Exit(code=code)
     try:
-        results = run_stages(cfg, STAGES, only=stage, force=force, quiet=quiet, resume=resume)
+        results = run_stages(cfg, STAGES, only=stage, force=force, quiet=quiet, resume=resume, shards=shards)
     except (StageError, ConfigError, ValueError, FileNotFoundError) as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=1) from None
@@ -112,6 +144,39 @@ def run(
         typer.echo(f"  {result.name:<10} {result.status:<9} {took}  {result.out_dir}")
         if result.summary and result.status == "ran":
             typer.echo("             " + json.dumps(result.summary, default=str)[:300])
+
+
+@app.command()
+def shard(
+    config: Path = CONFIG_ARG,
+    index: int = typer.Option(..., "--index", min=0, help="This shard's index k in [0, K)."),
+    shards: int = typer.Option(..., "--shards", min=1, help="K, the number of shards of the render."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; warnings and errors only."),
+    overrides: list[str] | None = SET_OPTION,
+) -> None:
+    """Render one shard of CONFIG's render into runs/<name>/.render.shards/ (a job of --shards K --profile)."""
+    setup_logging(quiet)
+    cfg = _load_or_exit(config, overrides)
+    if index >= shards:
+        typer.echo(f"error: --index {index} must be below --shards {shards}", err=True)
+        raise typer.Exit(code=2)
+    from pipeline.runner import shards_dir
+    from render.ptpb.stage import run_render_shard
+
+    base = run_dir(cfg)
+    if not (base / "scene" / "manifest.json").is_file():
+        typer.echo(
+            f"error: {base / 'scene'} is not finished; run `pipeline run {config} --stage scene` first", err=True
+        )
+        raise typer.Exit(code=1)
+    try:
+        record = run_render_shard(
+            base / "scene", cfg.render_settings(), shards_dir(base, "render"), index, shards, quiet=quiet
+        )
+    except ValueError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=1) from None
+    typer.echo(f"shard {index + 1}/{shards}: iterations {record.get('first_iteration')}..{record.get('end_iteration')}")
 
 
 @app.command(context_settings={"allow_extra_args": True})

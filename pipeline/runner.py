@@ -50,6 +50,8 @@ class StageContext:
     resume: bool = False
     previous_dir: Path | None = None  # the last complete output of this stage, if any (for resume)
     checkpoint_dir: Path | None = None  # survives the staging swap; holds what a resumed run continues from
+    shards: int = 1  # `pipeline run --shards K`: the render splits its iterations into K shards
+    shards_dir: Path | None = None  # survives the staging swap; holds the finished shards until the merge
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,11 @@ def run_dir(config) -> Path:
 def checkpoint_dir(base: Path, stage: str) -> Path:
     """Where ``stage`` of the run folder ``base`` keeps its checkpoints."""
     return base / f".{stage}.checkpoint"
+
+
+def shards_dir(base: Path, stage: str) -> Path:
+    """Where ``stage`` of the run folder ``base`` keeps its finished shards until they are merged."""
+    return base / f".{stage}.shards"
 
 
 def _remove_leftovers(base: Path, stage: str) -> None:
@@ -123,11 +130,14 @@ def run_stages(
     force: bool = False,
     quiet: bool = False,
     resume: bool = False,
+    shards: int = 1,
 ) -> list[StageResult]:
     """Run ``stages`` (already in dependency order) for ``config``; return what happened to each.
 
     ``only`` restricts the run to the named stages; their upstream stages must be finished.
     ``force`` re-runs the selected stages even when their manifests match.
+    ``shards`` splits the render's iterations (render/ptpb/split.py); finished shards are kept in
+    ``.<stage>.shards/`` until the stage is published.
     """
     by_name = {s.name: s for s in stages}
     for name in only or ():
@@ -182,6 +192,8 @@ def run_stages(
             resume=resume,
             previous_dir=final if final.exists() else None,
             checkpoint_dir=progress_dir,
+            shards=shards,
+            shards_dir=shards_dir(base, stage.name),
         )
         try:
             summary = stage.func(context) or {}
@@ -207,6 +219,7 @@ def run_stages(
         write_json_atomic(staging / MANIFEST_NAME, record)
         _publish(staging, final)
         shutil.rmtree(progress_dir, ignore_errors=True)  # the published output supersedes it
+        shutil.rmtree(shards_dir(base, stage.name), ignore_errors=True)
         digests[stage.name] = record["outputs_digest"]
         log.info("stage %s: done in %.1f s -> %s", stage.name, seconds, final)
         results.append(StageResult(stage.name, "ran", final, seconds, summary))

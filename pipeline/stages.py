@@ -46,6 +46,8 @@ def render_stage(ctx: StageContext) -> dict:
         ctx.out_dir,
         quiet=ctx.quiet,
         checkpoint_dir=ctx.checkpoint_dir,
+        shards=ctx.shards,
+        shards_dir=ctx.shards_dir,
     )
 
 

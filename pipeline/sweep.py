@@ -455,14 +455,17 @@ def snakemake_command(
     profile: str | None = None,
     dry_run: bool = False,
     extra: tuple[str, ...] | list[str] = (),
+    snakefile: Path = SNAKEFILE,
 ) -> list[str]:
+    """The snakemake command for a workflow config (its ``folder`` is the working directory); the sweep's
+    Snakefile unless ``snakefile`` names another (the shards' workflow, pipeline/shards.py)."""
     spec = yaml.safe_load(workflow_yaml.read_text(encoding="utf-8"))
     command = [
         sys.executable,
         "-m",
         "snakemake",
         "--snakefile",
-        str(SNAKEFILE),
+        str(snakefile),
         "--directory",
         spec["folder"],
         "--configfile",

@@ -49,6 +49,25 @@ class CompositeConfig(StrictModel):
     streak_column: int | None = Field(
         None, ge=0, description="Image column of the y–t streak image [px]; null = middle."
     )
+    archival_cut: bool = Field(
+        False,
+        description="Also write <stem>_10bit.mp4: the clip in 10-bit H.264 (High 10, yuv420p10le, BT.709 tags) for "
+        "archiving and grading, beside the 8-bit web cut (render/output/LOOK.md) [-].",
+    )
+    exr_frames: bool = Field(
+        False,
+        description="Also write exr/frame_NNNN.exr, the linear frames with their OPL, time since first light, clip "
+        "exposure and the render's config hash in the header [-].",
+    )
+    light_in_flight: bool = Field(
+        False,
+        description="Also write light_in_flight.mp4 (each frame's light over the dimmed steady image), "
+        "light_in_flight_panel.png (four moments of it in a 2 x 2 panel of the still's size), still.png (the steady "
+        "image at full size) and time_of_arrival.png [-].",
+    )
+    light_in_flight_dim: float = Field(
+        0.25, gt=0, le=1, description="Brightness of the steady image under the light in flight [-]."
+    )
     difference_vmax: float = Field(
         0.5, gt=0, description="Upper end of the relative-difference colour scale in comparisons [-]."
     )

@@ -162,11 +162,12 @@ class PTPBConfig(StrictModel):
     memory_budget_gib: float | None = Field(
         8.0,
         gt=0,
-        description="Refuse, before allocating, a render whose image buffers exceed this. They take 20 bytes per value "
-        "of (3 + temporal_bins) x height x width x 3 (double sums and per-iteration buffers, float32 results; 8 more "
-        "with checkpoints or a resume) plus 12 bytes per pixel for each kept snapshot. The film is refused, not "
-        "rendered in chunks of frames: every ray-beam pair splats into all the frames its kernel covers in one pass, "
-        "and chunks would trace every light path once per chunk. 8 suits a 24 GiB machine; null: no limit [GiB].",
+        description="Peak image buffers of one render pass. They take about 4 bytes per value of temporal_bins x "
+        "height x width x 3 (float32 frame sums; 8 in a shard, which sums in float64) plus 36 per pixel value for "
+        "steady, early and late and a double tile film per thread. A film over this renders in frame windows, one "
+        "pass each (every pass re-traces the same random streams and keeps its window's frames, written straight to "
+        "frames.npy), so the result does not depend on the split; the render stage logs the windows. 8 suits a 24 "
+        "GiB machine; null: one pass whatever the size [GiB].",
     )
 
     @model_validator(mode="after")

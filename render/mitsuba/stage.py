@@ -10,7 +10,7 @@ from pipeline.atomic import save_npy_atomic, write_json_atomic
 from pipeline.schema.scene import ReferenceConfig
 from render.mitsuba.export import TRANSIENT_SEED_OFFSET, check_reference_limits
 from render.mitsuba.passes import render_steady, render_transient
-from render.output.exr import write_exr
+from render.output.exr import write_exr, write_exr_frames
 from render.output.figures import rendered_image
 from render.output.files import FRAME_UNITS, REFERENCE_TIMING, STEADY, FrameAxis, write_frames
 from render.scene.model import Scene
@@ -75,16 +75,7 @@ def run_reference_stage(
         axis = FrameAxis(scene.film.start_opl, scene.film.bin_width_opl, "bins", scene.film.temporal_bins)
         write_frames(out_dir, frames, axis, renderer="mitransient", camera_leg_included=True)
         save_npy_atomic(out_dir / "transient_steady.npy", steady)
-        described = axis.describe(len(frames))
-        for k, frame in enumerate(frames):
-            metadata = {
-                "penitentes:opl_m": described["frame_centres_opl_m"][k],
-                "penitentes:time_ns_since_first_light": described["frame_centres_ns_since_first_light"][k],
-                "penitentes:bin_width_opl_m": axis.bin_width_opl,
-                "penitentes:frame_mode": "bins",
-                "penitentes:unit": described["unit"],
-            }
-            write_exr(out_dir / "frames" / f"frame_{k:04d}.exr", frame, attributes=metadata)
+        write_exr_frames(out_dir / "frames", frames, axis)
         timing["film"]["start_opl_shift_m"] = timing["transient"]["start_opl_shift_m"]
     write_json_atomic(out_dir / REFERENCE_TIMING, timing)
     return {

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenImageIO as oiio
@@ -45,6 +46,30 @@ def write_exr(
         finally:
             out.close()
     return Path(path)
+
+
+def write_exr_frames(
+    folder: str | os.PathLike[str],
+    frames: np.ndarray,
+    axis: Any,
+    attributes: Mapping[str, str | float | int] | None = None,
+) -> list[Path]:
+    """Write a (T, H, W, 3) stack as ``folder/frame_NNNN.exr``, each header with the frame's OPL, its time
+    in ns since first light, the bin width, the frame mode and unit (``axis``: a render.output.files
+    FrameAxis) and ``attributes`` (e.g. the clip exposure and the render's config hash)."""
+    described = axis.describe(len(frames))
+    paths = []
+    for k in range(len(frames)):
+        metadata = {
+            "penitentes:opl_m": described["frame_centres_opl_m"][k],
+            "penitentes:time_ns_since_first_light": described["frame_centres_ns_since_first_light"][k],
+            "penitentes:bin_width_opl_m": axis.bin_width_opl,
+            "penitentes:frame_mode": axis.frame_mode,
+            "penitentes:unit": described["unit"],
+            **(attributes or {}),
+        }
+        paths.append(write_exr(Path(folder) / f"frame_{k:04d}.exr", frames[k], attributes=metadata))
+    return paths
 
 
 def read_exr(path: str | os.PathLike[str]) -> np.ndarray:

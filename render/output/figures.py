@@ -185,3 +185,31 @@ def arrival_map(first_arrival_opl: np.ndarray, path: Path, title: str) -> list[P
     ax.set_title(title, fontsize=10)
     ax.axis("off")
     return _save(fig, path)
+
+
+def time_of_arrival_map(
+    frames: np.ndarray, start_opl: float, bin_width_opl: float, path: Path, title: str, fraction: float = 0.05
+) -> list[Path]:
+    """Per pixel, the time since first light at which its luminance, summed over the frames, first reaches
+    ``fraction`` of its total, in ns, in a perceptual colour map (viridis); pixels without light are blank.
+    A fraction rather than the first non-zero frame keeps one stray early photon from setting the time."""
+    from pipeline.units import NS_PER_M_OPL
+
+    frames = np.asarray(frames)
+    running = np.zeros(frames.shape[1:3])
+    for frame in frames:  # one frame at a time: the stack may be a memory-mapped film
+        running += luminance(frame)
+    total = running
+    arrival = np.full(total.shape, np.nan)
+    running = np.zeros(total.shape)
+    for k, frame in enumerate(frames):
+        running += luminance(frame)
+        reached = np.isnan(arrival) & (total > 0) & (running >= fraction * total)
+        arrival[reached] = (k + 0.5) * bin_width_opl * NS_PER_M_OPL
+    height, width = int(frames.shape[1]), int(frames.shape[2])
+    fig, ax = plt.subplots(figsize=(6.5, 6.5 * height / width + 0.5))
+    shown = ax.imshow(arrival, cmap="viridis", interpolation="nearest")
+    fig.colorbar(shown, ax=ax, label=f"time of arrival ({fraction:.0%} of the light), ns since first light", shrink=0.8)
+    ax.set_title(title, fontsize=10)
+    ax.axis("off")
+    return _save(fig, path)

@@ -75,11 +75,17 @@ def write_frames(folder: Path, frames: np.ndarray, axis: FrameAxis, **about: Any
     """Write ``frames.npy`` (T, H, W, 3) float32 and its description ``frames.json`` (``about`` adds
     entries, e.g. the renderer and whether the camera leg is in the OPL)."""
     save_npy_atomic(folder / FRAMES, frames)
+    describe_frames(folder, frames.shape, axis, **about)
+
+
+def describe_frames(folder: Path, shape: tuple[int, ...], axis: FrameAxis, **about: Any) -> None:
+    """Write ``frames.json`` for a ``frames.npy`` already in ``folder`` (a windowed or merged render
+    writes its frames to disk as it goes)."""
     description = {
         "file": FRAMES,
         "layout": "(T, H, W, 3) float32, linear RGB, frame k at OPL start_opl_m + (k + 1/2) bin_width_opl_m",
-        "shape": list(frames.shape),
-        **axis.describe(len(frames)),
+        "shape": list(shape),
+        **axis.describe(int(shape[0])),
         **about,
     }
     write_json_atomic(folder / FRAMES_DESCRIPTION, description)
@@ -125,17 +131,20 @@ class RenderOutputs:
             "run the render or reference stage first"
         )
 
-    def _array(self, name: str) -> np.ndarray | None:
+    def _array(self, name: str, memory_mapped: bool = False) -> np.ndarray | None:
         path = self.folder / name
-        return np.load(path, allow_pickle=False) if path.is_file() else None
+        if not path.is_file():
+            return None
+        return np.load(path, allow_pickle=False, mmap_mode="r" if memory_mapped else None)
 
     def steady(self) -> np.ndarray | None:
         """The steady image (H, W, 3), or None when the stage wrote none."""
         return self._array(STEADY)
 
-    def frames(self) -> np.ndarray | None:
-        """The frames (T, H, W, 3) float32 as written (gate or bins), or None."""
-        return self._array(FRAMES)
+    def frames(self, memory_mapped: bool = False) -> np.ndarray | None:
+        """The frames (T, H, W, 3) float32 as written (gate or bins), or None; ``memory_mapped`` reads them
+        from disk as they are used (a poster or video film larger than memory)."""
+        return self._array(FRAMES, memory_mapped)
 
     def frames_as_bins(self) -> np.ndarray | None:
         """The frames as bin integrals, comparable between renderers."""
@@ -154,5 +163,6 @@ __all__ = [
     "STEADY",
     "FrameAxis",
     "RenderOutputs",
+    "describe_frames",
     "write_frames",
 ]

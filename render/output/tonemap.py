@@ -53,14 +53,22 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1 / 2.4) - 0.055)
 
 
+def display_values(frames: np.ndarray, scale: float | np.ndarray, curve: ToneCurve = "reinhard") -> np.ndarray:
+    """Linear RGB (..., 3) times ``scale`` -> tone curve -> sRGB encoding, as floats in [0, 1]."""
+    x = np.asarray(frames, dtype=np.float64) * np.asarray(scale, dtype=np.float64)
+    return srgb_encode(tone_curve(x, curve))
+
+
 def to_display(
     frames: np.ndarray,
     scale: float | np.ndarray,
     curve: ToneCurve = "reinhard",
+    bits: int = 8,
 ) -> np.ndarray:
-    """Linear RGB (..., 3) times ``scale`` -> tone curve -> sRGB -> uint8."""
-    x = np.asarray(frames, dtype=np.float64) * np.asarray(scale, dtype=np.float64)
-    return np.round(srgb_encode(tone_curve(x, curve)) * 255.0).astype(np.uint8)
+    """Linear RGB (..., 3) times ``scale`` -> tone curve -> sRGB -> uint8 (``bits`` 16: uint16, for the
+    10-bit archival cut)."""
+    top = 255.0 if bits == 8 else 65535.0
+    return np.round(display_values(frames, scale, curve) * top).astype(np.uint8 if bits == 8 else np.uint16)
 
 
 def display_frames(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import av
@@ -68,29 +69,69 @@ def annotate(
     return np.asarray(pil)
 
 
-def write_mp4(path: str | Path, frames: np.ndarray, fps: float, crf: int = 18) -> Path:
-    """Encode uint8 (T, H, W, 3) frames as H.264 (yuv420p) MP4, atomically."""
+# The cuts of a clip (render/output/LOOK.md): pixel format, codec profile and file tags, after the ASWF
+# encoding guidelines. Both are BT.709 primaries, transfer and matrix in TV (limited) range.
+@dataclass(frozen=True)
+class Cut:
+    pix_fmt: str
+    profile: str  # x264's profile name
+    crf: int
+
+
+CUTS = {"web": Cut("yuv420p", "high", 18), "archival": Cut("yuv420p10le", "high10", 12)}
+BT709 = 1  # the ITU-T H.273 code of BT.709 for color_primaries, color_trc and colorspace
+RANGE_TV = 1  # AVCOL_RANGE_MPEG: limited ("tv") range
+
+
+def write_mp4(path: str | Path, frames: np.ndarray, fps: float, crf: int | None = None, cut: str = "web") -> Path:
+    """Encode (T, H, W, 3) display frames as H.264 MP4, atomically, tagged BT.709 in TV range with the index
+    up front (``+faststart``). ``cut`` "web": uint8 frames, yuv420p, CRF 18; "archival": uint16 frames
+    (display values x 65535), yuv420p10le (High 10). Odd sizes are padded by edge replication."""
+    if cut not in CUTS:
+        raise ValueError(f"unknown cut '{cut}': use {' or '.join(CUTS)}")
+    spec = CUTS[cut]
     frames = np.asarray(frames)
-    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
-        raise ValueError(f"video frames must be uint8 (T, H, W, 3), got {frames.dtype} {frames.shape}")
+    dtype = np.uint16 if cut == "archival" else np.uint8
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != dtype:
+        raise ValueError(
+            f"{cut} video frames must be {np.dtype(dtype)} (T, H, W, 3), got {frames.dtype} {frames.shape}"
+        )
     if len(frames) == 0:
         raise ValueError("a video needs at least one frame")
     if not fps > 0:
         raise ValueError(f"frame rate must be positive, got {fps}")
-    # yuv420p needs even sizes: pad by edge replication.
+    # 4:2:0 needs even sizes: pad by edge replication.
     pad_h, pad_w = frames.shape[1] % 2, frames.shape[2] % 2
-    if pad_h or pad_w:
-        frames = np.pad(frames, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)), mode="edge")
     from fractions import Fraction
 
+    from av.video.reformatter import ColorRange, Colorspace
+
+    source_format = "rgb48le" if cut == "archival" else "rgb24"
     with atomic_path(path) as tmp:
-        with av.open(str(tmp), mode="w", format="mp4") as container:
+        with av.open(str(tmp), mode="w", format="mp4", options={"movflags": "+faststart"}) as container:
             stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1000))
-            stream.width, stream.height = frames.shape[2], frames.shape[1]
-            stream.pix_fmt = "yuv420p"
-            stream.options = {"crf": str(crf), "preset": "medium"}
+            stream.width, stream.height = frames.shape[2] + pad_w, frames.shape[1] + pad_h
+            stream.pix_fmt = spec.pix_fmt
+            context = stream.codec_context
+            context.color_primaries = BT709
+            context.color_trc = BT709
+            context.colorspace = BT709
+            context.color_range = RANGE_TV
+            stream.options = {
+                "crf": str(spec.crf if crf is None else crf),
+                "preset": "medium",
+                "profile": spec.profile,
+                "x264-params": "colorprim=bt709:transfer=bt709:colormatrix=bt709",
+            }
             for frame in frames:
-                for packet in stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")):
+                if pad_h or pad_w:
+                    frame = np.pad(frame, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+                rgb = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format=source_format)
+                # The RGB -> YUV matrix must be BT.709 to match the tags (swscale's default is BT.601).
+                yuv = rgb.reformat(
+                    format=spec.pix_fmt, dst_colorspace=Colorspace.ITU709, dst_color_range=ColorRange.MPEG
+                )
+                for packet in stream.encode(yuv):
                     container.mux(packet)
             for packet in stream.encode():
                 container.mux(packet)
@@ -98,12 +139,38 @@ def write_mp4(path: str | Path, frames: np.ndarray, fps: float, crf: int = 18) -
 
 
 def probe_mp4(path: str | Path) -> dict:
-    """Decode a video fully; return its codec, frame count and size (used by tests and reports)."""
+    """Decode a video fully; return its codec, profile, pixel format, colour tags, frame count and size
+    (used by tests and reports; PyAV's stream info, as ffprobe would print it)."""
     with av.open(str(path)) as container:
         stream = container.streams.video[0]
+        context = stream.codec_context
         count = 0
         width = height = 0
         for frame in container.decode(stream):
             count += 1
             width, height = frame.width, frame.height
-        return {"codec": stream.codec_context.name, "frames": count, "width": width, "height": height}
+        return {
+            "codec": context.name,
+            "profile": context.profile,
+            "pix_fmt": context.pix_fmt,
+            "color_primaries": int(context.color_primaries),
+            "color_trc": int(context.color_trc),
+            "colorspace": int(context.colorspace),
+            "color_range": int(context.color_range),
+            "frames": count,
+            "width": width,
+            "height": height,
+        }
+
+
+def moov_before_mdat(path: str | Path) -> bool:
+    """Whether the MP4's index (moov) comes before its media (mdat): ``+faststart``, playable while loading."""
+    data = Path(path).read_bytes()
+    boxes, position = [], 0
+    while position + 8 <= len(data):  # the top-level boxes: 32-bit size (1: 64-bit follows, 0: to the end), type
+        size = int.from_bytes(data[position : position + 4], "big")
+        if size == 1:
+            size = int.from_bytes(data[position + 8 : position + 16], "big")
+        boxes.append(data[position + 4 : position + 8])
+        position += size if size >= 8 else len(data)
+    return b"moov" in boxes and b"mdat" in boxes and boxes.index(b"moov") < boxes.index(b"mdat")

@@ -100,7 +100,11 @@ def render(
     and, past 10^4 iterations, their float32 rounding remainders ``frames_carry``, the
     ``stats`` counters, ``snapshot_iterations``/``snapshot_seconds``/``snapshots``) every
     ``checkpoint_every_iterations`` iterations or ``checkpoint_every_s`` seconds and once more when
-    the run is cancelled; ``resume=state`` continues from one, bit-identically (render/core/DESIGN.md §9)."""
+    the run is cancelled; ``resume=state`` continues from one, bit-identically (render/core/DESIGN.md §9).
+
+    The film's ``window_first``/``window_count`` keep only those frames (a windowed pass), and the
+    overrides ``first_iteration``/``keep_sums`` run a shard whose images are float64 sums, not averages
+    (render/ptpb/split.py)."""
     from render import _core
 
     scene, core_settings = core_inputs(scene, settings, **overrides)
@@ -130,12 +134,14 @@ def render(
         if bar is not None:
             bar.close()
     stats = dict(out["stats"])  # with the resolved schedule: alpha, surface_alpha, initial_*_m
+    # keep_sums (a shard, render/ptpb/split.py): the undivided float64 sums in the same fields.
+    suffix = "_sum" if "steady_sum" in out else ""
     return RenderResult(
-        out["steady"],
-        out["frames"],
-        out["early"],
-        out["late"],
+        out["steady" + suffix],
+        out["frames" + suffix],
+        out["early" + suffix],
+        out["late" + suffix],
         stats,
-        list(out["snapshots"]),
-        list(out["snapshot_seconds"]),
+        list(out.get("snapshots", [])),
+        list(out.get("snapshot_seconds", [])),
     )

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import logging
+import time
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +27,20 @@ from pipeline.memory import PeakMemory
 from pipeline.schema.ptpb import PTPBConfig
 from render.output.exr import write_exr
 from render.output.figures import rendered_image
-from render.output.files import FRAME_UNITS, OURS_STATS, STEADY, FrameAxis, write_frames
-from render.ptpb.api import core_inputs, render
+from render.output.files import FRAME_UNITS, FRAMES, OURS_STATS, STEADY, FrameAxis, describe_frames, write_frames
+from render.ptpb.api import RenderResult, core_inputs, render
 from render.ptpb.checkpoint import CHECKPOINT_NAME, load_checkpoint, render_fingerprint, save_checkpoint
+from render.ptpb.split import (
+    calibrate,
+    frame_count,
+    merge_shards,
+    plan_windows,
+    read_shard,
+    refuse_time_budget,
+    render_shard,
+    render_windowed,
+    shard_ranges,
+)
 
 log = logging.getLogger(__name__)
 
@@ -66,13 +78,21 @@ def run_render_stage(
     *,
     quiet: bool = False,
     checkpoint_dir: Path | None = None,
+    shards: int = 1,
+    shards_dir: Path | None = None,
 ) -> dict:
     """Render the scene in ``scene_dir`` with ``cfg`` (in a pipeline, ``Config.render_settings()``: the
     render section with the root's seed and threads and the scene's path depth).
 
     ``checkpoint_dir`` holds the checkpoint that ``render.checkpoint_every_*`` saves and a resumed run
     continues from (the stage runner passes ``.render.checkpoint`` next to ``out_dir``); without it the
-    render neither saves nor resumes checkpoints."""
+    render neither saves nor resumes checkpoints.
+
+    A film whose buffers exceed ``render.memory_budget_gib`` renders in frame windows straight into
+    ``frames.npy``; ``shards`` > 1 renders the iterations in that many shards under ``shards_dir`` (a
+    finished shard of the same scene and settings is kept, so shards that SLURM jobs rendered are only
+    merged) and merges them (render/ptpb/split.py). A long render first times one iteration and logs
+    the predicted wall time and peak memory."""
     out_dir = Path(out_dir)
     scene = load_core_scene(Path(scene_dir))
     path = Path(checkpoint_dir) / CHECKPOINT_NAME if checkpoint_dir is not None else None
@@ -92,9 +112,39 @@ def run_render_stage(
         log.info("render: checkpoint after %d iterations -> %s", state["stats"]["iterations"], path)
 
     checkpoint = (lambda state: save(state, path)) if path is not None else None
+    out_dir.mkdir(parents=True, exist_ok=True)
+    core_scene, core_settings = core_inputs(scene, cfg)
+    windows = plan_windows(core_scene, core_settings, cfg.memory_budget_gib) if frame_count(core_scene) else [(0, 0)]
+    if shards > 1 and shards_dir is None:
+        raise ValueError("render: shards need a folder for their sums (shards_dir)")
+    shards_left = (
+        shards > 1 and shards_dir is not None and not _all_shards_done(cfg, shards, Path(shards_dir), fingerprint)
+    )
+    # The merge job of a SLURM run finds every shard done: nothing is left to predict.
+    plan = calibrate(core_scene, core_settings, windows, shards) if shards == 1 or shards_left else None
+    if plan is not None:
+        log.info("render: %s", plan["summary"])
+    frames_written = False
     with PeakMemory() as memory:  # this render's own peak, not the whole run's (pipeline/memory.py)
-        result = render(scene, cfg, progress=not quiet, resume=resume, checkpoint=checkpoint)
-    if result.stats["interrupted"]:
+        if shards > 1 and shards_dir is not None:
+            result = _render_in_shards(scene, cfg, shards, Path(shards_dir), out_dir / FRAMES, fingerprint, quiet)
+            frames_written = True
+        elif len(windows) > 1:
+            if cfg.checkpoint_every_iterations or cfg.checkpoint_every_s:
+                log.warning("render: a windowed render takes no checkpoints (each window is its own pass)")
+            log.info(
+                "render: %d frames over the memory budget: %d windows %s",
+                frame_count(core_scene),
+                len(windows),
+                windows,
+            )
+            result = render_windowed(scene, cfg, out_dir / FRAMES, windows, progress=not quiet).result
+            frames_written = True
+        else:
+            result = render(scene, cfg, progress=not quiet, resume=resume, checkpoint=checkpoint)
+    if plan is not None:
+        result.stats["calibration"] = plan
+    if result.stats.get("interrupted"):
         done = result.stats["iterations"]
         if path is not None and (cfg.checkpoint_every_iterations or cfg.checkpoint_every_s):
             log.warning(
@@ -109,7 +159,6 @@ def run_render_stage(
                 done,
             )
         raise KeyboardInterrupt
-    out_dir.mkdir(parents=True, exist_ok=True)
     write_exr(out_dir / "steady.exr", result.steady)
     rendered_image(
         result.steady,
@@ -129,7 +178,11 @@ def run_render_stage(
     film = scene["film"]
     frame_mode = cfg.frame_mode or film["frame_mode"]
     axis = FrameAxis(film.get("start_opl", 0.0), film.get("bin_width_opl", 0.003), frame_mode, len(result.frames))
-    write_frames(out_dir, result.frames, axis, renderer="ours (PTPB)", camera_leg_included=not cfg.camera_unwarp)
+    about = {"renderer": "ours (PTPB)", "camera_leg_included": not cfg.camera_unwarp}
+    if frames_written:
+        describe_frames(out_dir, result.frames.shape, axis, **about)
+    else:
+        write_frames(out_dir, result.frames, axis, **about)
     stats = {
         **{k: (v.item() if hasattr(v, "item") else v) for k, v in result.stats.items()},
         **memory.record(),
@@ -143,3 +196,62 @@ def run_render_stage(
     }
     write_json_atomic(out_dir / OURS_STATS, stats)
     return stats
+
+
+def shard_folder(shards_dir: Path, index: int) -> Path:
+    return Path(shards_dir) / f"shard-{index}"
+
+
+def run_render_shard(
+    scene_dir: Path, cfg: PTPBConfig, shards_dir: Path, index: int, shards: int, *, quiet: bool = False
+) -> dict:
+    """Render shard ``index`` of ``shards`` of the scene in ``scene_dir`` into ``shards_dir/shard-<index>``
+    (one SLURM job of `pipeline run --shards K --profile slurm`); a finished shard of the same scene
+    and settings is kept."""
+    refuse_time_budget(cfg)
+    scene = load_core_scene(Path(scene_dir))
+    fingerprint = render_fingerprint(*core_inputs(scene, cfg))
+    folder = shard_folder(shards_dir, index)
+    if _shard_done(read_shard(folder), fingerprint, shard_ranges(cfg.iterations, shards)[index]):
+        log.info("render: shard %d/%d is already done (%s)", index + 1, shards, folder)
+        return read_shard(folder) or {}
+    return render_shard(scene, cfg, folder, index, shards, progress=not quiet, fingerprint=fingerprint)
+
+
+def _shard_done(record: dict | None, fingerprint: dict, iterations: tuple[int, int]) -> bool:
+    """A finished shard of this scene and settings over the same iterations."""
+    return (
+        record is not None
+        and record.get("fingerprint") == fingerprint
+        and (record["first_iteration"], record["end_iteration"]) == tuple(iterations)
+    )
+
+
+def _all_shards_done(cfg: PTPBConfig, shards: int, shards_dir: Path, fingerprint: dict) -> bool:
+    ranges = shard_ranges(cfg.iterations, shards)
+    return all(_shard_done(read_shard(shard_folder(shards_dir, k)), fingerprint, ranges[k]) for k in range(shards))
+
+
+def _render_in_shards(
+    scene: dict, cfg: PTPBConfig, shards: int, shards_dir: Path, frames_path: Path, fingerprint: dict, quiet: bool
+) -> RenderResult:
+    refuse_time_budget(cfg)
+    ranges = shard_ranges(cfg.iterations, shards)  # refuses more shards than iterations before any work
+    folders = [shard_folder(shards_dir, k) for k in range(shards)]
+    t0 = time.perf_counter()
+    rendered = 0
+    for k, folder in enumerate(folders):
+        if _shard_done(read_shard(folder), fingerprint, ranges[k]):
+            log.info("render: shard %d/%d already done", k + 1, shards)
+            continue
+        render_shard(scene, cfg, folder, k, shards, progress=not quiet, fingerprint=fingerprint)
+        rendered += 1
+        per_shard = (time.perf_counter() - t0) / rendered
+        log.info(
+            "render: shard %d/%d done; ETA %.0f s for the %d left",
+            k + 1,
+            shards,
+            per_shard * (shards - k - 1),
+            shards - k - 1,
+        )
+    return merge_shards(folders, frames_path)

@@ -13,7 +13,7 @@ from render.output.composite import side_by_side, streak_images, transient_video
 from render.output.files import FrameAxis
 from render.output.metrics import per_frame_relmse, relmse, rmse
 from render.output.tonemap import display_frames, luminance
-from render.output.video import probe_mp4
+from render.output.video import moov_before_mdat, probe_mp4
 
 
 def pulse_frames(t_count=12, height=20, width=30, seed=0):
@@ -47,7 +47,49 @@ def test_videos_decode_with_the_right_frame_count_and_size(tmp_path):
     for key in ("video", "cumulative_video"):
         info = probe_mp4(paths[key])
         # 21 rows upscaled x4 to 84 (>= 64), 30 columns to 120; both already even.
-        assert info == {"codec": "h264", "frames": 9, "width": 120, "height": 84}
+        assert (info["codec"], info["frames"], info["width"], info["height"]) == ("h264", 9, 120, 84)
+
+
+BT709_TV = {"color_primaries": 1, "color_trc": 1, "colorspace": 1, "color_range": 1}  # H.273 codes; range 1 = tv
+
+
+def test_web_and_archival_cuts_carry_their_codec_pixel_format_and_bt709_tags(tmp_path):
+    frames = pulse_frames(t_count=7, height=65, width=33)
+    cfg = CompositeConfig(video_min_height=64, fps=24, archival_cut=True)
+    paths = transient_videos(frames, FrameAxis(0.0, 0.003), cfg, tmp_path)
+    web, archival = probe_mp4(paths["video"]), probe_mp4(paths["archival_video"])
+    # 65 x 33 is not upscaled (>= 64 rows) but padded to 66 x 34: 4:2:0 needs even sizes.
+    for info in (web, archival):
+        assert (info["codec"], info["frames"], info["width"], info["height"]) == ("h264", 7, 34, 66)
+        assert {k: info[k] for k in BT709_TV} == BT709_TV
+    assert (web["pix_fmt"], web["profile"]) == ("yuv420p", "High")
+    assert (archival["pix_fmt"], archival["profile"]) == ("yuv420p10le", "High 10")
+    assert moov_before_mdat(paths["video"]) and moov_before_mdat(paths["archival_video"])
+
+
+def test_light_in_flight_time_of_arrival_and_exr_frames(tmp_path):
+    from render.output.composite import light_in_flight
+    from render.output.exr import write_exr_frames
+
+    frames = pulse_frames(t_count=8, height=20, width=30)
+    cfg = CompositeConfig(video_min_height=64, fps=24, light_in_flight=True)
+    axis = FrameAxis(3.0, 0.03, "bins", 8)
+    paths = light_in_flight(frames, frames.sum(axis=0), axis, cfg, tmp_path)
+    assert probe_mp4(paths["light_in_flight"])["frames"] == 8
+    assert paths["time_of_arrival"].stat().st_size > 1000
+    from PIL import Image
+
+    assert Image.open(paths["still"]).size == Image.open(paths["light_in_flight_panel"]).size == (30, 20)
+    written = write_exr_frames(
+        tmp_path / "exr", frames, axis, {"penitentes:exposure": 2.5, "penitentes:config_hash": "abc"}
+    )
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageInput.open(str(written[3])).spec()
+    assert spec.getattribute("penitentes:opl_m") == pytest.approx(3.0 + 3.5 * 0.03)
+    assert spec.getattribute("penitentes:time_ns_since_first_light") == pytest.approx(3.5 * 0.03 / SPEED_OF_LIGHT * 1e9)
+    assert spec.getattribute("penitentes:exposure") == pytest.approx(2.5)
+    assert spec.getattribute("penitentes:config_hash") == "abc"
 
 
 def test_slow_motion_sets_the_frame_rate_and_absurd_rates_are_refused(tmp_path):

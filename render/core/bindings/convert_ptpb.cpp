@@ -232,6 +232,8 @@ Scene parse_scene(const py::dict& d) {
   sc.film.temporal_bins = get<int>(film, "temporal_bins", 0, "film");
   sc.film.start_opl = get<double>(film, "start_opl", 0.0, "film");
   sc.film.bin_width_opl = get<double>(film, "bin_width_opl", 0.003, "film");
+  sc.film.window_first = get<int>(film, "window_first", 0, "film");
+  sc.film.window_count = get<int>(film, "window_count", -1, "film");
   return sc;
 }
 
@@ -284,6 +286,8 @@ RenderSettings parse_settings(const py::dict& d) {
   s.snapshot_every = get<int>(d, "snapshot_every", 0, w);
   s.checkpoint_every_iterations = get<int>(d, "checkpoint_every_iterations", 0, w);
   s.checkpoint_every_s = get<double>(d, "checkpoint_every_s", 0.0, w);
+  s.first_iteration = get<int>(d, "first_iteration", 0, w);
+  s.keep_sums = get<bool>(d, "keep_sums", false, w);
   // None: no limit (the config's null).
   if (d.contains("memory_budget_gib"))
     s.memory_budget_gib = d["memory_budget_gib"].is_none() ? 0.0 : get<double>(d, "memory_budget_gib", 0.0, w);
@@ -364,10 +368,14 @@ RenderState parse_state(const py::dict& d) {
 }
 
 // NumPy array that takes ownership of a vector's buffer (no copy).
-py::array_t<float> owned_array(std::vector<float>&& v, std::vector<py::ssize_t> shape) {
-  auto* holder = new std::vector<float>(std::move(v));
-  py::capsule free_when_done(holder, [](void* p) { delete static_cast<std::vector<float>*>(p); });
-  return py::array_t<float>(shape, holder->data(), free_when_done);
+template <typename T>
+py::array_t<T> owned_array(std::vector<T>&& v, std::vector<py::ssize_t> shape) {
+  auto* holder = new std::vector<T>(std::move(v));
+  py::capsule free_when_done(holder, [](void* p) { delete static_cast<std::vector<T>*>(p); });
+  return py::array_t<T>(shape, holder->data(), free_when_done);
 }
+
+template py::array_t<float> owned_array(std::vector<float>&&, std::vector<py::ssize_t>);
+template py::array_t<double> owned_array(std::vector<double>&&, std::vector<py::ssize_t>);
 
 }  // namespace ptpb_bindings

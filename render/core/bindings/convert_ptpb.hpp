@@ -31,6 +31,7 @@ py::dict state_dict(const ptpb::RenderState& st);
 ptpb::RenderState parse_state(const py::dict& d);
 
 // NumPy array that takes ownership of a vector's buffer (no copy).
-py::array_t<float> owned_array(std::vector<float>&& v, std::vector<py::ssize_t> shape);
+template <typename T>
+py::array_t<T> owned_array(std::vector<T>&& v, std::vector<py::ssize_t> shape);
 
 }  // namespace ptpb_bindings

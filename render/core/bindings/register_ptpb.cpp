@@ -97,6 +97,15 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
   if (callback_error) throw std::move(*callback_error);
   const py::ssize_t H = r.height, W = r.width, F = r.frame_count;
   py::dict out;
+  if (settings.keep_sums) {
+    // A shard: the undivided float64 sums, which a merge adds in shard order (DESIGN.md §9).
+    out["steady_sum"] = owned_array(std::move(r.steady_sum), {H, W, 3});
+    out["frames_sum"] = owned_array(std::move(r.frames_sum), {F, H, W, 3});
+    out["early_sum"] = owned_array(std::move(r.early_sum), {H, W, 3});
+    out["late_sum"] = owned_array(std::move(r.late_sum), {H, W, 3});
+    out["stats"] = result_stats_dict(r.stats, interrupted);
+    return out;
+  }
   out["steady"] = owned_array(std::move(r.steady), {H, W, 3});
   out["frames"] = owned_array(std::move(r.frames), {F, H, W, 3});
   out["early"] = owned_array(std::move(r.early), {H, W, 3});

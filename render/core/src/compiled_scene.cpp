@@ -145,6 +145,9 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
     require(film.temporal_bins > 0, "film.temporal_bins must be > 0 in bins/gate mode");
     require(std::isfinite(film.bin_width_opl) && film.bin_width_opl > 0, "film.bin_width_opl must be > 0");
     require(std::isfinite(film.start_opl), "film.start_opl must be finite");
+    require(film.window_first >= 0 && film.window_first < film.temporal_bins,
+            "film.window_first must lie in [0, temporal_bins)");
+    require(film.window_count != 0, "film.window_count must be > 0 (or < 0: every frame from window_first on)");
   }
 }
 

@@ -5,19 +5,21 @@
 
 namespace ptpb {
 
-int film_frame_count(const Film& film) { return film.mode == FrameMode::Steady ? 0 : std::max(0, film.temporal_bins); }
-
-RenderState empty_state(int W, int H, int F, std::uint64_t seed) {
+RenderState empty_state(int W, int H, int F, const RenderSettings& settings) {
   RenderState st;
   st.width = W;
   st.height = H;
   st.frame_count = F;
-  st.seed = seed;
+  st.seed = settings.seed;
+  st.stats.iterations_done = settings.first_iteration;
   const std::size_t px3 = std::size_t(W) * H * 3;
   st.steady.assign(px3, 0.0);
   st.early.assign(px3, 0.0);
   st.late.assign(px3, 0.0);
-  st.frames.assign(std::size_t(F) * px3, 0.0f);
+  if (settings.keep_sums)
+    st.frames_double.assign(std::size_t(F) * px3, 0.0);
+  else
+    st.frames.assign(std::size_t(F) * px3, 0.0f);
   return st;
 }
 
@@ -63,6 +65,27 @@ RenderResult average_state(RenderState& state) {
   return result;
 }
 
+RenderResult sum_state(RenderState& state) {
+  RenderResult result;
+  result.width = state.width;
+  result.height = state.height;
+  result.frame_count = state.frame_count;
+  auto total = [](const std::vector<double>& v) {
+    double sum = 0.0;
+    for (double x : v) sum += x;
+    return sum;
+  };
+  state.stats.steady_total = total(state.steady);
+  state.stats.early_total = total(state.early);
+  state.stats.late_total = total(state.late);
+  result.steady_sum = std::move(state.steady);
+  result.early_sum = std::move(state.early);
+  result.late_sum = std::move(state.late);
+  result.frames_sum = std::move(state.frames_double);
+  result.stats = state.stats;
+  return result;
+}
+
 void TileFilm::flush(RenderState& st) {
   const int W = st.width;
   const std::size_t px3 = std::size_t(W) * st.height * 3;
@@ -77,10 +100,19 @@ void TileFilm::flush(RenderState& st) {
       }
     }
   const bool carry = !st.frames_carry.empty();
+  const bool in_double = !st.frames_double.empty();
   for (int k = kmin; k <= kmax; ++k)
     for (int ly = 0; ly < h; ++ly) {
       double* src = values.data() + (3 + std::size_t(k)) * plane + std::size_t(ly) * side * 3;
       const std::size_t offset = std::size_t(k) * px3 + (std::size_t(y0 + ly) * W + x0) * 3;
+      if (in_double) {
+        double* dst = st.frames_double.data() + offset;
+        for (int i = 0; i < 3 * w; ++i) {
+          dst[i] += src[i];
+          src[i] = 0.0;
+        }
+        continue;
+      }
       float* dst = st.frames.data() + offset;
       if (carry) {
         float* rem = st.frames_carry.data() + offset;

@@ -49,7 +49,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   const std::size_t frame_values = std::size_t(F) * px_count * 3;
 
   if (resume) validate_resume(*resume, scene, settings, W, H, F);
-  RenderState state = resume ? std::move(*resume) : empty_state(W, H, F, settings.seed);
+  RenderState state = resume ? std::move(*resume) : empty_state(W, H, F, settings);
   resume.reset();
   RenderStats& stats = state.stats;
   stats.cancelled = false;
@@ -133,7 +133,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
 
     // 3. Camera pass by tiles; each tile owns its pixels.
     t0 = Clock::now();
-    if (it >= settings.compensated_sums_from && F > 0 && state.frames_carry.empty())
+    if (it >= settings.compensated_sums_from && F > 0 && !settings.keep_sums && state.frames_carry.empty())
       state.frames_carry.assign(frame_values, 0.0f);
     pass.beams = &beams;
     pass.accel = accel.get();
@@ -192,7 +192,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   // A cancelled run keeps its completed iterations for a later resume.
   if (checkpointing && cancel.load() && stats.iterations_done > checkpointed_iterations) save_checkpoint();
   stats.cancelled = cancel.load();
-  RenderResult result = average_state(state);
+  RenderResult result = settings.keep_sums ? sum_state(state) : average_state(state);
   result.stats.time_total_s = elapsed();
   return result;
 }

@@ -27,7 +27,7 @@ bool all_finite(const std::vector<T>& v) {
 }
 
 bool uses_frame_remainders(const RenderSettings& s) {
-  return s.time_budget_s > 0 || s.iterations > s.compensated_sums_from;
+  return !s.keep_sums && (s.time_budget_s > 0 || s.iterations > s.compensated_sums_from);
 }
 
 }  // namespace
@@ -67,6 +67,12 @@ void validate_settings(const RenderSettings& s) {
   require(s.compensated_sums_from >= 0, "compensated_sums_from must be >= 0");
   require(std::isfinite(s.memory_budget_gib) && s.memory_budget_gib >= 0,
           "memory_budget_gib must be >= 0 (0: no limit)");
+  require(s.first_iteration >= 0 && (s.time_budget_s > 0 || s.first_iteration < s.iterations),
+          "first_iteration must lie in [0, iterations) (a shard runs iterations [first_iteration, iterations))");
+  require(!(s.time_budget_s > 0 && (s.keep_sums || s.first_iteration > 0)),
+          "time_budget_s and shards (first_iteration, keep_sums) do not mix: a shard runs a fixed range of iterations");
+  require(!(s.keep_sums && (s.checkpoint_every_iterations > 0 || s.checkpoint_every_s > 0)),
+          "keep_sums (a shard) does not take checkpoints: rerun a failed shard instead");
 }
 
 // A resume state must belong to this film, seed and bandwidth schedule: the bandwidths of its last
@@ -122,7 +128,8 @@ double render_memory_bytes(const Scene& scene, const RenderSettings& s, bool sta
   // Double sums of steady, early, late and their float32 results; float32 frame sums (scaled in
   // place into the result), with as many remainders in a long run; a double tile film per thread.
   const double planes = 3.0 * px3 * (sizeof(double) + sizeof(float));
-  const double frames = F * px3 * sizeof(float) * (uses_frame_remainders(s) ? 2.0 : 1.0);
+  const double frames =
+      F * px3 * (s.keep_sums ? sizeof(double) : sizeof(float) * (uses_frame_remainders(s) ? 2.0 : 1.0));
   const double tiles =
       double(resolve_thread_count(s.threads)) * double(s.tile_size) * s.tile_size * 3.0 * (3.0 + F) * sizeof(double);
   double bytes = planes + frames + tiles + snapshot_bytes;
@@ -139,9 +146,9 @@ void check_memory_budget(const Scene& scene, const RenderSettings& s, bool state
   throw std::invalid_argument(
       "the film needs " + gib_text(bytes) + " for its image buffers (" + std::to_string(film_frame_count(scene.film)) +
       " frames of " + std::to_string(scene.camera.width) + " x " + std::to_string(scene.camera.height) +
-      " px, summed in float32), more than render.memory_budget_gib = " + budget +
-      "; lower scene.film.temporal_bins or scene.camera.width/height, or raise render.memory_budget_gib "
-      "(frames are not split into chunks: every pair splats into all its frames in one pass)");
+      " px), more than render.memory_budget_gib = " + budget +
+      "; render the film in frame windows (scene.film window_first/window_count; the render stage plans them), "
+      "lower scene.film.temporal_bins or scene.camera.width/height, or raise render.memory_budget_gib");
 }
 
 }  // namespace ptpb

@@ -157,6 +157,47 @@ TEST_CASE("bins: frames + early + late equal the steady image; threads and struc
   CHECK(a.stats.pair_evaluations == d.stats.pair_evaluations);
 }
 
+TEST_CASE("a frame window holds exactly those frames of the whole film; early and late stay the film's") {
+  for (FrameMode mode : {FrameMode::Bins, FrameMode::Gate}) {
+    Scene sc = cube_scene();
+    sc.film.mode = mode;
+    const RenderSettings s = small_settings();
+    const RenderResult whole = render(sc, s);
+    sc.film.window_first = 7;
+    sc.film.window_count = 9;
+    const RenderResult window = render(sc, s);
+    CHECK(window.frame_count == 9);
+    const std::size_t px3 = std::size_t(whole.width) * whole.height * 3;
+    bool same = window.early == whole.early && window.late == whole.late && window.steady == whole.steady;
+    for (std::size_t i = 0; i < window.frames.size(); ++i) same = same && window.frames[i] == whole.frames[7 * px3 + i];
+    CHECK(same);
+  }
+}
+
+TEST_CASE("shards: iterations [a, b) in double sums add up to the whole run") {
+  Scene sc = cube_scene();
+  sc.film.mode = FrameMode::Gate;
+  RenderSettings s = small_settings();
+  s.iterations = 4;
+  const RenderResult whole = render(sc, s);
+  s.keep_sums = true;
+  s.iterations = 1;
+  const RenderResult first = render(sc, s);
+  s.first_iteration = 1;
+  s.iterations = 4;
+  const RenderResult rest = render(sc, s);
+  CHECK(first.frames.empty() && first.frames_sum.size() == whole.frames.size());
+  CHECK(rest.stats.iterations_done == 4);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < whole.frames.size(); ++i) {
+    const double merged = (first.frames_sum[i] + rest.frames_sum[i]) / 4.0;
+    if (whole.frames[i] > 0) worst = std::max(worst, std::abs(merged - whole.frames[i]) / whole.frames[i]);
+  }
+  CHECK(worst < 1e-6);
+  s.time_budget_s = 1.0;
+  CHECK_THROWS(render(sc, s));  // shards do not take a time budget
+}
+
 TEST_CASE("the structure is built with the scheduled radius R_i") {
   RenderSettings s = small_settings();
   s.iterations = 11;

@@ -14,15 +14,21 @@
 #include "ptpb/kernels.hpp"
 #include "ptpb/render.hpp"
 #include "ptpb/scene.hpp"
+#include "ptpb/settings.hpp"
 #include "ptpb/vec.hpp"
 
 namespace ptpb {
 
-// Frames a film holds: none in steady mode.
-int film_frame_count(const Film& film);
+// Frames a film (or its window) holds: none in steady mode.
+inline int film_frame_count(const Film& film) {
+  if (film.mode == FrameMode::Steady) return 0;
+  const int rest = std::max(0, film.temporal_bins - std::max(0, film.window_first));
+  return film.window_count < 0 ? rest : std::min(rest, film.window_count);
+}
 
-// The zeroed sums of a render that has not started.
-RenderState empty_state(int W, int H, int F, std::uint64_t seed);
+// The zeroed sums of a render that has not started: at settings.first_iteration (a shard), with the
+// frame sums in double under settings.keep_sums.
+RenderState empty_state(int W, int H, int F, const RenderSettings& settings);
 
 // Keeps the steady average after `iterations` iterations, taken `seconds` into the render.
 void add_snapshot(RenderState& state, long iterations, double seconds);
@@ -30,6 +36,9 @@ void add_snapshot(RenderState& state, long iterations, double seconds);
 // The averages of the state's sums, with their totals in stats (for the window check). The frame
 // sums become the averages in place, so the state gives up its buffers: no second film at the end.
 RenderResult average_state(RenderState& state);
+
+// The state's double sums, undivided, for a shard's merge (settings.keep_sums); the state gives them up.
+RenderResult sum_state(RenderState& state);
 
 // One tile's share of one iteration's film, in double (DESIGN.md §9 "Memory"): planes of
 // tile_size^2 pixels x 3 for steady, early, late and then frame 0 .. F-1. The tile's owner splats
@@ -96,7 +105,8 @@ struct PixelSplat {
     s[2] += v.z;
     if (film.mode == FrameMode::Steady || timeless) return;
     const double rel = (tau - film.start_opl) / film.bin_width_opl;
-    const int F = film.temporal_bins;
+    const int F = film.temporal_bins;  // early and late are outside the whole film, not the window
+    const int first = film.window_first, end = first + film_frame_count(film);
     double* side = rel < 0 ? tile.early(local) : (rel >= F ? tile.late(local) : nullptr);
     if (side) {
       side[0] += v.x;
@@ -106,7 +116,8 @@ struct PixelSplat {
     if (film.mode == FrameMode::Bins) {
       if (side) return;
       const int k = std::min(F - 1, static_cast<int>(std::floor(rel)));
-      double* f = tile.frame(k, local);
+      if (k < first || k >= end) return;
+      double* f = tile.frame(k - first, local);
       f[0] += v.x;
       f[1] += v.y;
       f[2] += v.z;
@@ -116,14 +127,14 @@ struct PixelSplat {
     const double dt = film.bin_width_opl;
     const double kmin_real = std::ceil((tau - T - film.start_opl) / dt - 0.5);
     const double kmax_real = std::floor((tau + T - film.start_opl) / dt - 0.5);
-    if (kmax_real < 0 || kmin_real >= F) return;
-    const int kmin = static_cast<int>(std::max(0.0, kmin_real));
-    const int kmax = static_cast<int>(std::min(double(F - 1), kmax_real));
+    if (kmax_real < first || kmin_real >= end) return;
+    const int kmin = static_cast<int>(std::max(double(first), kmin_real));
+    const int kmax = static_cast<int>(std::min(double(end - 1), kmax_real));
     for (int k = kmin; k <= kmax; ++k) {
       const double tk = film.start_opl + (k + 0.5) * dt;
       const double w = temporal_kernel(kernel, tk - tau, T);
       if (w == 0.0) continue;
-      double* f = tile.frame(k, local);
+      double* f = tile.frame(k - first, local);
       f[0] += w * v.x;
       f[1] += w * v.y;
       f[2] += w * v.z;

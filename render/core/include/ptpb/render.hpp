@@ -59,6 +59,7 @@ struct RenderState {
   // remainder: the sum is then frames + frames_carry, about 48 significant bits. Empty before.
   std::vector<float> frames;
   std::vector<float> frames_carry;
+  std::vector<double> frames_double;  // with settings.keep_sums: the frame sums in double, frames empty
   RenderStats stats;
   std::vector<int> snapshot_iterations;
   std::vector<double> snapshot_seconds;
@@ -77,6 +78,8 @@ struct RenderResult {
   std::vector<int> snapshot_iterations;
   std::vector<double> snapshot_seconds;       // wall time since the start of the render, per snapshot
   std::vector<std::vector<float>> snapshots;  // steady averages, H x W x 3 each
+  // With settings.keep_sums, the undivided double sums instead of the averages (which stay empty).
+  std::vector<double> steady_sum, early_sum, late_sum, frames_sum;
   RenderStats stats;
 };
 

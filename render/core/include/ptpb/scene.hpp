@@ -69,6 +69,11 @@ struct Film {
   int temporal_bins = 0;
   double start_opl = 0.0;        // m
   double bin_width_opl = 0.003;  // m
+  // The frames one pass holds (DESIGN.md §9 "Windows"): [window_first, window_first + window_count) of
+  // the temporal_bins, the rest dropped; window_count < 0 holds all from window_first on. Early and late
+  // stay relative to the whole film, so windows rendered in turn join into the single-pass film.
+  int window_first = 0;
+  int window_count = -1;
 };
 
 struct Scene {

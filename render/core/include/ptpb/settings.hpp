@@ -62,6 +62,10 @@ struct RenderSettings {
   // From this iteration on the float32 frame sums carry their rounding remainders (RenderState).
   // Not a user setting (the bindings keep the default); tests lower it to reach that code.
   int compensated_sums_from = 10000;
+  // Shards (DESIGN.md §9): run iterations [first_iteration, iterations) of the global schedule, and with
+  // keep_sums return the undivided sums in double (frames summed in double too) for an exact merge.
+  int first_iteration = 0;
+  bool keep_sums = false;
 };
 
 }  // namespace ptpb

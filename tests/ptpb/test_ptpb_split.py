@@ -1,0 +1,144 @@
+"""Split invariance (render/core/DESIGN.md §9 "Windows and shards"): a film rendered in frame windows, or
+its iterations in shards merged, equals the single-pass render of all iterations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.schema.ptpb import PTPBConfig
+from render.ptpb import render
+from render.ptpb.split import SplitError, merge_shards, plan_windows, render_shard, render_windowed, shard_ranges
+from render.scene.shapes import box_mesh, quad_mesh
+
+ITERATIONS = 8
+
+
+def medium_and_floor_scene(frame_mode: str) -> dict:
+    """A scattering cube on a diffuse floor under an area light: beams and surface photons both splat."""
+    cv, cf = box_mesh()
+    lv, lf = quad_mesh(center=(0, 1.5, 0), u=(0.25, 0, 0), v=(0, 0, 0.25))
+    fv, ff = quad_mesh(center=(0, -0.5, 0), u=(2.0, 0, 0), v=(0, 0, -2.0))
+    return {
+        "media": [{"sigma_s": [3.6, 5.4, 7.2], "sigma_a": [0.4, 0.6, 0.8], "g": 0.7}],
+        "shapes": [
+            {"vertices": cv, "faces": cf, "kind": "null", "interior": 0},
+            {"vertices": lv, "faces": lf, "kind": "diffuse", "radiance": [20, 20, 20]},
+            {"vertices": fv, "faces": ff, "kind": "diffuse", "albedo": [0.8, 0.7, 0.6]},
+        ],
+        "camera": {
+            "origin": [0, 0.8, 2.89],
+            "target": [0, 0, 0],
+            "up": [0, 1, 0],
+            "fov": 40,
+            "width": 12,
+            "height": 10,
+        },
+        "film": {"frame_mode": frame_mode, "temporal_bins": 30, "start_opl": 3.5, "bin_width_opl": 0.05},
+    }
+
+
+SETTINGS: dict = {
+    "iterations": ITERATIONS,
+    "light_paths_per_iteration": 300,
+    "snapshot_every": 0,
+    "threads": 2,
+    "seed": 5,
+    "memory_budget_gib": None,
+}
+
+
+def assert_close(ours: np.ndarray, reference: np.ndarray) -> None:
+    assert ours.shape == reference.shape
+    scale = np.maximum(np.abs(reference), 1e-30)
+    relative = np.abs(ours.astype(np.float64) - reference) / scale
+    assert np.count_nonzero(reference) > 0
+    assert relative.max() <= 1e-6, f"largest relative difference {relative.max():.3g}"
+
+
+# The medium's estimators: beams, and where the core has it (the dense-media work), the path tracer; every
+# estimator splats through the same film, so windows must join for each.
+ESTIMATORS = ["beams", "paths"] if "medium_estimator" in PTPBConfig.model_fields else [None]
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+@pytest.mark.parametrize("frame_mode", ["bins", "gate"])
+def test_windows_join_into_the_single_pass_film(tmp_path, frame_mode, estimator):
+    scene = medium_and_floor_scene(frame_mode)
+    settings = SETTINGS if estimator is None else {**SETTINGS, "medium_estimator": estimator}
+    whole = render(scene, settings)
+    assert whole.stats["surface_pairs"] > 0
+    assert estimator == "paths" or whole.stats["pair_evaluations"] > 0  # the medium's beams were gathered
+    windows = [(0, 7), (7, 7), (14, 9), (23, 7)]
+    first = render_windowed(scene, settings, tmp_path / "a.npy", windows)
+    again = render_windowed(scene, settings, tmp_path / "b.npy", windows)
+    assert_close(np.asarray(first.result.frames), whole.frames)
+    np.testing.assert_array_equal(np.asarray(first.result.frames), np.asarray(again.result.frames))
+    for name in ("steady", "early", "late"):
+        np.testing.assert_array_equal(getattr(first.result, name), getattr(whole, name))
+
+
+def test_a_window_keeps_only_its_frames_and_early_late_mean_outside_the_whole_film():
+    scene = medium_and_floor_scene("bins")
+    whole = render(scene, SETTINGS)
+    window = render({**scene, "film": {**scene["film"], "window_first": 10, "window_count": 5}}, SETTINGS)
+    assert window.frames.shape == (5, 10, 12, 3)
+    np.testing.assert_array_equal(window.frames, whole.frames[10:15])
+    np.testing.assert_array_equal(window.late, whole.late)
+    np.testing.assert_array_equal(window.early, whole.early)
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+@pytest.mark.parametrize("frame_mode", ["bins", "gate"])
+def test_four_shards_merged_equal_the_single_process_render(tmp_path, frame_mode, estimator):
+    scene = medium_and_floor_scene(frame_mode)
+    settings = SETTINGS if estimator is None else {**SETTINGS, "medium_estimator": estimator}
+    whole = render(scene, settings)
+    folders = [tmp_path / f"shard-{k}" for k in range(4)]
+    for k in (2, 0, 3, 1):  # finishing order does not matter
+        render_shard(scene, settings, folders[k], k, 4)
+    merged = merge_shards(folders, tmp_path / "frames.npy", chunk_bytes=7 * 8 * 360)  # 7 frames a chunk
+    assert merged.stats["iterations"] == ITERATIONS
+    assert_close(np.asarray(merged.frames), whole.frames)
+    for name in ("steady", "early", "late"):
+        assert_close(getattr(merged, name), getattr(whole, name))
+
+
+def test_windows_fit_the_budget_and_cover_the_film():
+    from render.ptpb.api import core_inputs
+    from render.ptpb.split import window_bytes
+
+    scene, core = core_inputs(medium_and_floor_scene("gate"), SETTINGS)
+    budget = window_bytes(scene, core, 8) / 2**30
+    windows = plan_windows(scene, core, budget)
+    assert len(windows) == 4 and sum(c for _, c in windows) == 30
+    assert all(window_bytes(scene, core, c) <= budget * 2**30 for _, c in windows)
+    assert [f for f, _ in windows] == [0, 8, 16, 24]
+
+
+def test_shard_ranges_and_refusals():
+    assert shard_ranges(10, 4) == [(0, 2), (2, 5), (5, 7), (7, 10)]
+    with pytest.raises(SplitError, match="--shards 5 exceeds render.iterations"):
+        shard_ranges(4, 5)
+    from render.ptpb.split import refuse_time_budget
+
+    with pytest.raises(SplitError, match="render.time_budget_s"):
+        refuse_time_budget(PTPBConfig(time_budget_s=10))
+
+
+def test_render_stage_windows_over_budget_and_merges_shards(scene_dir, tmp_path):
+    from render.ptpb.stage import run_render_stage
+
+    cfg = PTPBConfig(iterations=4, light_paths_per_iteration=200, snapshot_every=0, threads=2, seed=3)
+    single = run_render_stage(
+        scene_dir, cfg.model_copy(update={"memory_budget_gib": None}), tmp_path / "one", quiet=True
+    )
+    frames = np.load(tmp_path / "one" / "frames.npy")
+    # A budget that holds about a third of the 30 frames: the stage renders windows into frames.npy.
+    tight = cfg.model_copy(update={"memory_budget_gib": 0.16e-3})
+    windowed = run_render_stage(scene_dir, tight, tmp_path / "win", quiet=True)
+    assert len(windowed["windows"]) > 1 and "windows" not in single
+    np.testing.assert_array_equal(np.load(tmp_path / "win" / "frames.npy"), frames)
+    shards = run_render_stage(scene_dir, cfg, tmp_path / "sh", quiet=True, shards=2, shards_dir=tmp_path / "shards")
+    assert shards["shards"] == 2 and shards["iterations"] == 4
+    assert_close(np.load(tmp_path / "sh" / "frames.npy"), frames)
