@@ -50,6 +50,48 @@ def dominant_wavelength(h: np.ndarray, spacing: float) -> float:
     return _peak_wavelength(k, power, 2)
 
 
+def gain_spectrum(h: np.ndarray, h0: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Radially averaged log power gain of each Fourier mode since ``h0``: (|k| bin centres [rad m-1],
+    mean over the bin of ln(|h_k|^2 / |h0_k|^2) [-]), bins as in radial_power_spectrum.
+
+    Pre-whitening mode by mode: in a linear phase ln gain = 2 sigma(k) t exactly, whatever the random
+    start gave each mode, so the bins' means follow the growth rate after any time, where the raw
+    spectrum needs several e-folding times before the fastest band stands above the start's scatter
+    (DESIGN.md 7, V1). Bins with no mode, and the mean (k = 0), read 0."""
+    n = h.shape[0]
+    gain = np.log(
+        np.divide(
+            np.abs(np.fft.fft2(h - h.mean())) ** 2,
+            np.abs(np.fft.fft2(h0 - h0.mean())) ** 2,
+            out=np.ones(h.shape),
+            where=np.abs(np.fft.fft2(h0 - h0.mean())) > 0,
+        ).clip(1e-300)
+    )
+    f = np.fft.fftfreq(n, d=1.0 / n)
+    fy, fx = np.meshgrid(f, f, indexing="ij")
+    index = np.rint(np.hypot(fx, fy)).astype(int)
+    nbins = n // 2 + 1
+    sums = np.bincount(index.ravel(), weights=gain.ravel(), minlength=nbins)[:nbins]
+    counts = np.bincount(index.ravel(), minlength=nbins)[:nbins]
+    mean = np.divide(sums, counts, out=np.zeros(nbins), where=counts > 0)
+    mean[0] = 0.0
+    return np.arange(nbins) * 2.0 * np.pi / (n * spacing), mean
+
+
+def fastest_growing_wavelength(h: np.ndarray, h0: np.ndarray, spacing: float) -> float:
+    """Wavelength [m] at the peak of gain_spectrum (search from L/2, as dominant_wavelength), refined by a
+    parabola through the peak bin and its neighbours."""
+    k, gain = gain_spectrum(h, h0, spacing)
+    i = int(np.argmax(gain[2:]) + 2)
+    peak = float(i)
+    if 2 <= i - 1 and i + 1 < gain.size:
+        a, b, c = gain[i - 1 : i + 2]
+        denom = a - 2.0 * b + c
+        if denom < 0:
+            peak = i + 0.5 * (a - c) / denom
+    return float(2.0 * np.pi / (peak * k[1]))
+
+
 def _transects(h: np.ndarray, axis: int) -> np.ndarray:
     """The straight transects along ``axis`` (0: north-south columns, 1: east-west rows), one a row."""
     profiles = np.moveaxis(np.asarray(h, float), axis, 0)
@@ -193,6 +235,48 @@ def lean(h: np.ndarray, spacing: float, steep_deg: float = 30.0, sector_deg: flo
     }
 
 
+def _extremum_positions(profile: np.ndarray) -> list[tuple[bool, int, float]]:
+    """(is_crest, index, deviation) of the highest point of each stretch above a periodic profile's mean
+    and of the lowest point of each stretch below it, in order; indices may run past the profile's end."""
+    deviation = profile - profile.mean()
+    above = deviation > 0
+    starts = np.flatnonzero(above != np.roll(above, 1))
+    if starts.size < 2:
+        return []
+    bounds = np.append(starts, starts[0] + profile.size)
+    out = []
+    for begin, end in zip(bounds[:-1], bounds[1:]):
+        stretch = deviation[np.arange(begin, end) % profile.size]
+        crest = bool(above[begin % profile.size])
+        j = int(np.argmax(stretch) if crest else np.argmin(stretch))
+        out.append((crest, int(begin + j), float(stretch[j])))
+    return out
+
+
+def axis_lean(h: np.ndarray, spacing: float) -> float:
+    """Blade lean from the crest offset (V3's alternative, DESIGN.md 7): along each north-south transect,
+    each crest's distance north of the midpoint between the troughs on either side, over its height
+    above them; tau = atan(sum of offsets / sum of heights) over the crests taller than half the median
+    [deg, positive = leaning north]. Unlike lean(), it reads the blade's axis, not its walls' slopes,
+    so a grid that rounds the walls does not bias it. NaN where no transect has a crest between troughs."""
+    offsets, heights = [], []
+    for profile in _transects(h, 0):
+        extrema = _extremum_positions(profile)
+        for i, (crest, position, value) in enumerate(extrema):
+            south, north = extrema[i - 1], extrema[(i + 1) % len(extrema)]
+            if not crest or south[0] or north[0] or len(extrema) < 4:
+                continue
+            south_at = south[1] - (profile.size if i == 0 else 0)
+            north_at = north[1] + (profile.size if i + 1 == len(extrema) else 0)
+            offsets.append((position - 0.5 * (south_at + north_at)) * spacing)
+            heights.append(value - 0.5 * (south[2] + north[2]))
+    if not heights:
+        return float("nan")
+    offset, height = np.array(offsets), np.array(heights)
+    tall = height > 0.5 * np.median(height)
+    return float(np.degrees(np.arctan2(offset[tall].sum(), height[tall].sum())))
+
+
 def relief(h: np.ndarray) -> dict:
     """RMS height, the relief 2 sqrt 2 RMS (crest to trough of near-sinusoidal rows, DESIGN.md V3)
     and the 1-99 % range [m]."""
@@ -231,6 +315,7 @@ def morphology(h: np.ndarray, spacing: float) -> dict:
     out["crest_density_per_m2"] = crest_density(h, spacing)
     out.update(ridge_orientation(h, spacing))
     out.update(lean(h, spacing))
+    out["axis_lean_north_deg"] = axis_lean(h, spacing)
     height = out["crest_to_trough_m"]
     out["spacing_to_height"] = out["crest_spacing_m"] / height if height > 0 else float("inf")
     return out

@@ -98,9 +98,12 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     summary_metrics = metrics.morphology(h, spacing)
     delta = float(sunpath.declination(last_day))
     summary_metrics["noon_zenith_angle_deg"] = float(np.degrees(sunpath.noon_zenith_angle(cfg.latitude, delta)))
-    summary_metrics["lean_toward_equator_deg"] = (
-        summary_metrics["lean_north_deg"] if cfg.latitude < 0 else -summary_metrics["lean_north_deg"]
+    summary_metrics["noon_zenith_growth_weighted_deg"] = float(
+        np.degrees(sunpath.growth_weighted_noon_zenith(cfg.latitude, cfg.start_day_of_year, grown.relief_history))
     )
+    toward_equator = 1.0 if cfg.latitude < 0 else -1.0
+    summary_metrics["lean_toward_equator_deg"] = toward_equator * summary_metrics["lean_north_deg"]
+    summary_metrics["axis_lean_toward_equator_deg"] = toward_equator * summary_metrics["axis_lean_north_deg"]
     summary_metrics.update(noon_radiation_metrics(h, spacing, cfg, last_day))
     summary_metrics["onset_wavelength_m"] = ablation.onset_wavelength(cfg.optical_efolding_depth)
     history = {"day": grown.snapshot_days.tolist(), **metrics.season_history(grown.snapshots, spacing)}

@@ -52,6 +52,19 @@ def noon_zenith_angle(latitude: float, declination_rad: float) -> float:
     return abs(np.radians(latitude) - declination_rad)
 
 
+def growth_weighted_noon_zenith(latitude: float, start_day_of_year: int, relief_history: np.ndarray) -> float:
+    """Noon zenith angle [rad] of a season averaged over its days, each weighted by that day's rise of the
+    RMS relief (``relief_history``: RMS height before day 1 and after each day [m]). The lean is carved
+    while the relief grows, so this is the sun the walls were cut under (DESIGN.md 7, V3); days when the
+    relief fell or stood still weigh nothing. Falls back to the plain season mean if the relief never grew."""
+    growth = np.maximum(np.diff(np.asarray(relief_history, float)), 0.0)
+    days = start_day_of_year + np.arange(growth.size)
+    zenith = np.array([noon_zenith_angle(latitude, float(declination(float(day)))) for day in days])
+    if growth.sum() <= 0.0:
+        return float(zenith.mean())
+    return float(np.sum(zenith * growth) / growth.sum())
+
+
 @dataclass(frozen=True)
 class DailySun:
     """Sun positions that sample one day's daylight, each standing for an equal share of it."""

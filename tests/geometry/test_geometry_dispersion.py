@@ -123,3 +123,43 @@ def test_growth_rate_peaks_at_one_over_l():
     sigma = ablation.linear_growth_rate(k, A_B, 0.0, 0.0, efolding_depth)
     assert k[np.argmax(sigma)] == pytest.approx(1.0 / efolding_depth, rel=1e-3)
     assert sigma.max() == pytest.approx(A_B / (2 * efolding_depth), rel=1e-6)
+
+
+# V1 on the Tapado preset (DESIGN.md 7): 64^2 cells over 4 m (the demo's 6.25 cm cells), white noise.
+
+
+def _tapado_from_white_noise(rms: float, days: int):
+    from pathlib import Path
+
+    from pipeline.config import load_raw
+    from pipeline.schema.geometry import GeometryConfig
+
+    site = load_raw(Path(__file__).resolve().parents[2] / "configs" / "presets" / "sites" / "tapado.yaml")["geometry"]
+    cfg = GeometryConfig(
+        **{**site, "grid_cells": 64, "domain_size": 4.0, "days": days, "snapshots": 2, "initial_roughness_rms": rms}
+    )
+    rng = np.random.default_rng(7)
+    h0 = ablation.initial_height_field(cfg.grid_cells, cfg.spacing, rms, None, rng)
+    grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
+    return cfg, h0, grown.height
+
+
+def test_tapado_has_no_linear_phase_below_the_wake_slope():
+    """Why the Tapado onset spectrum is red (DESIGN.md 7, V1): white noise of 1.5 mm (slopes below the
+    wake slope) decays at every wavenumber, so the preset has no linear instability to select 2 pi l;
+    its forms grow only from finite roughness, through the shelter index's rectification."""
+    cfg, h0, h = _tapado_from_white_noise(0.0015, 10)
+    _, gain = metrics.gain_spectrum(h, h0, cfg.spacing)
+    assert gain[2:].max() < 0.0, gain
+
+
+@pytest.mark.xfail(
+    strict=True, reason="issue 18 V1 at Tapado: no linear phase; the pre-whitened spectrum is red (DESIGN.md 7)"
+)
+def test_tapado_onset_peaks_at_two_pi_l():
+    """V1 as the issue states it, on the Tapado preset: from its 3 cm white noise, the fastest-growing
+    wavelength (the pre-whitened spectrum's peak) over the first 20 days is 2 pi l = 0.38 m within 20 %.
+    Fails today: the gain rises to the longest waves (2.0 m)."""
+    cfg, h0, h = _tapado_from_white_noise(0.03, 20)
+    onset = metrics.fastest_growing_wavelength(h, h0, cfg.spacing)
+    assert onset == pytest.approx(ablation.onset_wavelength(cfg.optical_efolding_depth), rel=0.2)

@@ -71,3 +71,27 @@ def test_dominant_wavelength_is_never_the_domain():
     the answer is the strongest wavelength of L/2 or shorter, here the 0.8 m rows."""
     h = _rows(1.0 * np.cos(2 * np.pi * Y / L) + 0.3 * np.cos(2 * np.pi * Y / 0.8))
     assert metrics.dominant_wavelength(h, SPACING) == pytest.approx(0.8, rel=0.05)
+
+
+def test_axis_lean_reads_the_crest_offset():
+    """Rows whose crests stand 0.1 m north of the midpoint between their troughs, 0.4 m above them
+    (a skewed saw-tooth, 0.8 m period): the lean is atan(0.1 / 0.4) = 14 deg north, within the grid's
+    sampling of the troughs; symmetric rows do not lean."""
+    skewed = np.interp(Y % 0.8, [0.0, 0.5, 0.8], [0.0, 0.4, 0.0])
+    assert metrics.axis_lean(_rows(skewed), SPACING) == pytest.approx(14.0, abs=3.0)
+    assert metrics.axis_lean(_rows(skewed[::-1]), SPACING) < -10.0
+    assert metrics.axis_lean(_rows(np.cos(2 * np.pi * Y / 0.8)), SPACING) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_gain_spectrum_is_the_log_power_ratio_of_each_mode():
+    """A field that grew by exp(sigma(k) t) mode by mode reads 2 sigma(k) t in every bin, whatever the start."""
+    h0 = np.random.default_rng(2).standard_normal((N, N))
+    kx = 2 * np.pi * np.fft.fftfreq(N, d=SPACING)
+    k = np.hypot(*np.meshgrid(kx, kx, indexing="ij"))
+    rate = k * np.exp(-k / 8.0)  # peaks at |k| = 8 rad/m, i.e. 0.785 m
+    h = np.real(np.fft.ifft2(np.fft.fft2(h0) * np.exp(rate)))
+    bins, gain = metrics.gain_spectrum(h, h0, SPACING)
+    expected = 2 * bins * np.exp(-bins / 8.0)
+    # Bins hold |k| within half a fundamental of their centre, so the curved rate averages a little off near k = 0.
+    np.testing.assert_allclose(gain[2:], expected[2:], rtol=0.06)
+    assert metrics.fastest_growing_wavelength(h, h0, SPACING) == pytest.approx(2 * np.pi / 8.0, rel=0.05)

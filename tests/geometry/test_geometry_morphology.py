@@ -97,11 +97,14 @@ def test_forms_coarsen_through_the_season(tapado):
 
 
 def test_blades_lean_toward_noon_sun(tapado):
+    """Lean within 5 deg of the noon zenith angle the walls were cut under: each day's weighted by that
+    day's rise of the RMS relief (sunpath.growth_weighted_noon_zenith, 7.6 deg here). Both lean metrics,
+    the walls' slopes and the crests' offset, must hold. They do only marginally (3.1 and 3.5 deg, 4.0-4.5
+    short; DESIGN.md 7, V3)."""
     cfg, _, grown = tapado
-    delta = float(sunpath.declination(cfg.start_day_of_year + cfg.days // 2))
-    noon_zenith = np.degrees(sunpath.noon_zenith_angle(cfg.latitude, delta))
-    lean = metrics.lean(grown.height, cfg.spacing)["lean_north_deg"]
-    assert abs(lean - noon_zenith) <= 5.0
+    target = np.degrees(sunpath.growth_weighted_noon_zenith(cfg.latitude, cfg.start_day_of_year, grown.relief_history))
+    assert abs(metrics.lean(grown.height, cfg.spacing)["lean_north_deg"] - target) <= 5.0
+    assert abs(metrics.axis_lean(grown.height, cfg.spacing) - target) <= 5.0
 
 
 def test_spacing_comparable_to_height(tapado):
