@@ -172,7 +172,8 @@ def test_no_start_radius_biases_the_mean(sigma_t, mfps):
     lit = ref.mean(-1) > 1e-2 * ref.mean(-1).max()
     for mfp in mfps:
         r = render(
-            dense_cube(sigma_t, 0.9995, 0.0), settings(iterations=1, time_budget_s=12, initial_beam_radius=mfp / sigma_t)
+            dense_cube(sigma_t, 0.9995, 0.0),
+            settings(iterations=1, time_budget_s=12, initial_beam_radius=mfp / sigma_t),
         )
         ratio = r.steady[lit].mean() / ref[lit].mean()
         print(f"sigma_t {sigma_t}, R0 = {mfp} mfp: ours/volpath {ratio:.4f}, media on paths {r.stats['path_media']}")
@@ -189,7 +190,14 @@ def diffusion_slab(res: int = 16, frames: int = 160, width: float = 0.05) -> dic
         "media": [{"sigma_s": (60.0,) * 3, "sigma_a": (0.6,) * 3, "g": 0.0, "ior": 1.0}],
         "shapes": [{"vertices": v, "faces": f, "kind": "null", "interior": 0, "exterior": -1}],
         "directional_lights": [{"to_sun": (0, 0, 1), "irradiance": (1, 1, 1), "reference_point": (0, 0, 0)}],
-        "camera": {"origin": (0, 1e-3, 5.0), "target": (0, 0, 0), "up": (0, 1, 0), "fov": 8, "width": res, "height": res},
+        "camera": {
+            "origin": (0, 1e-3, 5.0),
+            "target": (0, 0, 0),
+            "up": (0, 1, 0),
+            "fov": 8,
+            "width": res,
+            "height": res,
+        },
         "film": {"frame_mode": "bins", "temporal_bins": frames, "start_opl": 5.0, "bin_width_opl": width},
     }
 
@@ -205,7 +213,9 @@ def test_time_resolved_diffusion_tail_of_a_thick_slab():
     fit = (s > 0.3) & (s < 6.0)
     design = np.stack([np.ones(fit.sum()), np.log(s[fit]), s[fit]], axis=1)
     (_, power, slope), *_ = np.linalg.lstsq(design, np.log(energy[fit]), rcond=None)
-    print(f"power {power:.3f} (diffusion -1.5), sigma_a {-slope:.4f} (0.6), late fraction {r.stats['late_fraction']:.2e}")
+    print(
+        f"power {power:.3f} (diffusion -1.5), sigma_a {-slope:.4f} (0.6), late fraction {r.stats['late_fraction']:.2e}"
+    )
     assert abs(power + 1.5) < 0.1
     assert abs(-slope / 0.6 - 1) < 0.05
 
@@ -237,7 +247,11 @@ def test_time_resolved_diffusion_tail_of_a_thick_slab():
                         "phase": {"type": "isotropic"},
                     },
                 },
-                "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": {"type": "rgb", "value": [1, 1, 1]}},
+                "sun": {
+                    "type": "directional",
+                    "direction": [0, 0, -1],
+                    "irradiance": {"type": "rgb", "value": [1, 1, 1]},
+                },
             }
         ),
         spp=4096,

@@ -93,6 +93,7 @@ RenderSettings small_settings() {
   s.max_depth = 16;
   s.seed = 5;
   s.threads = 1;
+  s.medium_estimator = MediumEstimator::Beams;  // these tests check the beam estimator (DESIGN.md §12)
   return s;
 }
 

@@ -26,10 +26,10 @@ struct SurfaceHit {
 // what arrives at x from the light along -direction, already through every index-matched boundary
 // and medium on the way, divided by the probability of having chosen this connection.
 struct LightConnection {
-  Vec3d direction{};   // unit, from x towards the light
-  Vec3d value{};       // radiance × transmittance (irradiance for the sun, I/d^2 for a point) / pdf
-  double pdf = 0.0;    // solid-angle pdf of the direction, light choice included; 0 for delta lights
-  double tau = 0.0;    // OPL from the light's emission to x (DESIGN.md §1); unused when timeless
+  Vec3d direction{};  // unit, from x towards the light
+  Vec3d value{};      // radiance × transmittance (irradiance for the sun, I/d^2 for a point) / pdf
+  double pdf = 0.0;   // solid-angle pdf of the direction, light choice included; 0 for delta lights
+  double tau = 0.0;   // OPL from the light's emission to x (DESIGN.md §1); unused when timeless
   bool timeless = false;
 };
 

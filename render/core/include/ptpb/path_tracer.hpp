@@ -14,8 +14,8 @@ struct PathStart {
   Vec3d position{};  // the scattering vertex
   Vec3d incoming{};  // the camera path's direction of travel into it
   int medium = kVacuum;
-  Vec3d weight{};     // camera throughput, the vertex's sampling weight σ_s Tr / p included
-  double tau = 0.0;   // camera OPL from the pinhole to the vertex
+  Vec3d weight{};        // camera throughput, the vertex's sampling weight σ_s Tr / p included
+  double tau = 0.0;      // camera OPL from the pinhole to the vertex
   int interactions = 0;  // non-null interactions on the camera side, this vertex included
 };
 
