@@ -87,10 +87,11 @@ sanitize: $(STAMPS)/venv ## Build the core with -fsanitize=address,undefined; ru
 	  $(PY) render/core/tests/sanitized_bindings.py build/sanitize $(SANITIZE_TESTS)
 	@rm -f build-sanitize.log
 
-bench: setup ## Benchmarks: ray engine, geometry against grid size, PTPB against Mitsuba and mitransient
+bench: setup ## Benchmarks: ray engine, geometry against grid size, PTPB against Mitsuba and mitransient, dense rows
 	$(PY) benchmarks/bench_rays.py
 	@if [ -f benchmarks/bench_geometry.py ]; then $(PY) benchmarks/bench_geometry.py; fi
 	$(PY) benchmarks/bench_ptpb.py
+	$(PY) benchmarks/bench_dense.py
 
 sweep: setup ## Run a config sweep (default configs/sweeps/default.yaml on 2 cores; SWEEP=..., CORES=...)
 	$(PY) -m pipeline sweep $(or $(SWEEP),configs/sweeps/default.yaml) --cores $(or $(CORES),2)

@@ -366,6 +366,15 @@ class ReferenceConfig(StrictModel):
         description="Wall-clock budget per reference; overrides spp, stopping after the pass that "
         "would overrun it [s].",
     )
+    rr_depth: int | None = Field(
+        None,
+        ge=1,
+        le=100000,
+        description="Depth from which Mitsuba's and mitransient's roulette starts; null = scene.rr_depth. Their "
+        "roulette keeps a path with at most 0.95, so in dense, high-albedo snow set it to hundreds or "
+        "thousands, or the long paths are almost never sampled and the references come out dark "
+        "(render/core/DESIGN.md §12). Roulette does not change what is estimated, only its noise [-].",
+    )
     variant: Literal["llvm_ad_rgb", "scalar_rgb"] = Field(
         "llvm_ad_rgb",
         description="Preferred Mitsuba variant; falls back to scalar_rgb with a warning (steady only) [-].",

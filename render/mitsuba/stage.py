@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 from typing import Any, TypedDict
@@ -33,6 +34,8 @@ def run_reference_stage(
     steady.exr/.npy, frames.npy, frames/frame_NNNN.exr, transient_steady.npy and timing.json."""
     scene_dir, out_dir = Path(scene_dir), Path(out_dir)
     scene = Scene.load(scene_dir / "scene.json")
+    if cfg.rr_depth is not None:  # the references' own roulette start (unbiased either way)
+        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
     transient = cfg.transient and scene.film.mode == "transient"
     warnings = check_reference_limits(scene, transient=transient, force=cfg.force)
     if cfg.transient and not transient:

@@ -150,9 +150,17 @@ def test_paths_match_volpath_on_the_translucent_cube():
 
 @pytest.mark.mitsuba
 @pytest.mark.slow
-@pytest.mark.parametrize(("sigma_t", "g"), [(400.0, 0.0), (400.0, 0.85), (2000.0, 0.0), (2000.0, 0.85)])
-def test_dense_cube_steady_mean_against_volpath(sigma_t, g):
-    refs = [mitsuba_dense_cube(sigma_t, 0.9995, g, spp=2048, seed=seed) for seed in range(4)]
+@pytest.mark.parametrize(
+    ("sigma_t", "g", "rr_depth", "tolerance"),
+    [(400.0, 0.0, 200, 0.02), (400.0, 0.85, 3000, 0.02), (2000.0, 0.0, 200, 0.05), (2000.0, 0.85, 3000, 0.05)],
+)
+def test_dense_cube_steady_mean_against_volpath(sigma_t, g, rr_depth, tolerance):
+    """Issue 16 asks for 2 %. At g = 0.85 a path leaves the snow after several times more collisions, so
+    volpath's roulette must start later still (3000) or its mean comes out 6 % low. At sigma_t = 2000 per m
+    volpath itself is off by a few per cent: single precision and its relative ray epsilon (DESIGN.md §12;
+    `test_paths_scale_invariance_in_the_semi_infinite_limit` shows ours is not), so only 5 % is asserted
+    there, and the closing note of issue 16 says that point is not met."""
+    refs = [mitsuba_dense_cube(sigma_t, 0.9995, g, spp=2048, seed=seed, rr_depth=rr_depth) for seed in range(4)]
     ref = np.mean(refs, axis=0)
     lit = ref.mean(-1) > 1e-2 * ref.mean(-1).max()
     runs = [render(dense_cube(sigma_t, 0.9995, g), settings(iterations=1, time_budget_s=15, seed=s)) for s in (1, 2)]
@@ -160,7 +168,7 @@ def test_dense_cube_steady_mean_against_volpath(sigma_t, g):
     ratio = ours / ref[lit].mean(0)
     spread = np.std([x[lit].mean() for x in refs], ddof=1) / np.sqrt(len(refs)) / ref[lit].mean()
     print(f"sigma_t {sigma_t} g {g}: ours/volpath {ratio}, volpath's standard error {spread:.4f}")
-    np.testing.assert_allclose(ratio, 1.0, atol=0.02)
+    np.testing.assert_allclose(ratio, 1.0, atol=tolerance)
 
 
 @pytest.mark.mitsuba
@@ -242,7 +250,8 @@ def test_time_resolved_diffusion_tail_of_a_thick_slab():
                     "bsdf": {"type": "null"},
                     "interior": {
                         "type": "homogeneous",
-                        "sigma_t": {"type": "rgb", "value": [60.6] * 3},
+                        "scale": 60.6,
+                        "sigma_t": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
                         "albedo": {"type": "rgb", "value": [60.0 / 60.6] * 3},
                         "phase": {"type": "isotropic"},
                     },

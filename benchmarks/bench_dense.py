@@ -1,0 +1,118 @@
+"""Equal-time rows against mitransient where paths matter (issue 16, render/core/DESIGN.md §12).
+
+For each row scene (configs/bench/dense_cube.yaml, demo_snow.yaml, thesis_set_1.yaml) this renders a long
+mitransient reference once (two halves, cached in benchmarks/results/cache/, as bench_ptpb.py does), then
+ours in bins mode for ``--seconds`` of wall time and mitransient's transient_prbvolpath for the same time,
+and reports each one's per-frame relMSE against the reference (its own noise taken out) and their ratio.
+Ours uses the medium estimator that `auto` picks for the scene (reported per row). Writes
+benchmarks/results/bench_dense.{md,csv}.
+
+    .venv/bin/python benchmarks/bench_dense.py              # all rows, 60 s each side
+    .venv/bin/python benchmarks/bench_dense.py --seconds 10 --rows dense_cube
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+from ptpb_bench_scene import RESULTS, bench_scene, reference  # noqa: E402
+
+from pipeline.atomic import write_text_atomic  # noqa: E402
+from pipeline.config import load_config  # noqa: E402
+
+ROWS = {
+    "dense_cube": REPO / "configs" / "bench" / "dense_cube.yaml",
+    "demo_snow": REPO / "configs" / "bench" / "demo_snow.yaml",
+    "thesis_set_1": REPO / "configs" / "bench" / "thesis_set_1.yaml",
+}
+THREADS = 2
+
+
+def ours(scene_dir: Path, cfg, seconds: float) -> tuple[np.ndarray, dict]:
+    from render.ptpb.api import load_scene, render
+
+    settings = cfg.render.model_validate(
+        {
+            **cfg.render.model_dump(),
+            "time_budget_s": seconds,
+            "threads": THREADS,
+            "seed": 0,
+            "snapshot_every": 0,
+            "frame_mode": "bins",
+            "max_depth": cfg.scene.max_depth,
+            "rr_depth": cfg.scene.rr_depth,
+        }
+    )
+    result = render(load_scene(scene_dir), settings)
+    return result.frames, result.stats
+
+
+def mitransient_equal_time(scene_dir: Path, seconds: float, spp_per_pass: int) -> tuple[np.ndarray, int, float]:
+    """mitransient's transient_prbvolpath in passes until ``seconds`` of rendering (after a warm-up)."""
+    import mitsuba as mi
+
+    from render.mitsuba.export import scene_to_mitsuba, use_variant
+    from render.scene.model import Scene
+
+    use_variant(transient=True)
+    scene_dict = scene_to_mitsuba(Scene.load(scene_dir / "scene.json"), scene_dir, transient=True, spp=spp_per_pass)
+    mi_scene = mi.load_dict(scene_dict)
+    mi.render(mi_scene, seed=99_999, spp=2)  # kernel compilation
+    total, spp, spent, passes = None, 0, 0.0, 0
+    while spent < seconds:
+        t0 = time.perf_counter()
+        out = mi.render(mi_scene, seed=passes, spp=spp_per_pass)
+        frames = np.moveaxis(np.array(out[1], dtype=np.float64)[..., :3], 2, 0)
+        spent += time.perf_counter() - t0
+        total = frames * spp_per_pass if total is None else total + frames * spp_per_pass
+        spp += spp_per_pass
+        passes += 1
+    assert total is not None
+    return total / spp, spp, spent
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0, help="wall time of each side per row [s]")
+    parser.add_argument("--rows", nargs="*", default=list(ROWS), choices=list(ROWS))
+    args = parser.parse_args()
+    lines = [
+        "| row | ours: estimator | ours relMSE | mitransient relMSE (spp) | ratio ours/mitransient | time each [s] |",
+        "|---|---|---|---|---|---|",
+    ]
+    csv = ["row,estimator_media_on_paths,ours_relmse,mitransient_relmse,mitransient_spp,ratio,seconds"]
+    for row in args.rows:
+        cfg = load_config(ROWS[row])
+        scene_dir = bench_scene(cfg)
+        ref = reference(scene_dir, cfg.reference)
+        error = ref.frame_error()
+        frames, stats = ours(scene_dir, cfg, args.seconds)
+        e_ours = error(frames)
+        frames_mt, spp, spent = mitransient_equal_time(scene_dir, args.seconds, cfg.reference.spp_per_pass)
+        e_mt = error(frames_mt)
+        ratio = e_ours / e_mt if e_mt > 0 else float("nan")
+        estimator = "paths" if stats["path_media"] else "beams"
+        print(
+            f"{row}: ours ({estimator}, {stats['iterations']} iterations) relMSE {e_ours:.3g}; mitransient "
+            f"({spp} spp, {spent:.0f} s) {e_mt:.3g}; ratio {ratio:.3g}; reference noise {error.reference_noise:.2g}",
+            flush=True,
+        )
+        lines.append(f"| {row} | {estimator} | {e_ours:.3g} | {e_mt:.3g} ({spp}) | {ratio:.3g} | {args.seconds:.0f} |")
+        csv.append(f"{row},{stats['path_media']},{e_ours:.6g},{e_mt:.6g},{spp},{ratio:.6g},{args.seconds}")
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(RESULTS / "bench_dense.md", "\n".join(lines) + "\n")
+    write_text_atomic(RESULTS / "bench_dense.csv", "\n".join(csv) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
