@@ -38,7 +38,7 @@ THREADS = 2
 
 
 def ours(scene_dir: Path, cfg, seconds: float) -> tuple[np.ndarray, dict]:
-    from render.ptpb.api import load_scene, render
+    from render.ptpb import load_scene, render
 
     settings = cfg.render.model_validate(
         {
@@ -56,15 +56,22 @@ def ours(scene_dir: Path, cfg, seconds: float) -> tuple[np.ndarray, dict]:
     return result.frames, result.stats
 
 
-def mitransient_equal_time(scene_dir: Path, seconds: float, spp_per_pass: int) -> tuple[np.ndarray, int, float]:
-    """mitransient's transient_prbvolpath in passes until ``seconds`` of rendering (after a warm-up)."""
+def mitransient_equal_time(scene_dir: Path, seconds: float, cfg) -> tuple[np.ndarray, int, float]:
+    """mitransient's transient_prbvolpath in passes of ``cfg.spp_per_pass`` until ``seconds`` of rendering
+    (after a warm-up), with the reference section's ``rr_depth`` when set."""
+    import dataclasses
+
     import mitsuba as mi
 
     from render.mitsuba.export import scene_to_mitsuba, use_variant
     from render.scene.model import Scene
 
     use_variant(transient=True)
-    scene_dict = scene_to_mitsuba(Scene.load(scene_dir / "scene.json"), scene_dir, transient=True, spp=spp_per_pass)
+    scene = Scene.load(scene_dir / "scene.json")
+    if cfg.rr_depth is not None:
+        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
+    spp_per_pass = cfg.spp_per_pass
+    scene_dict = scene_to_mitsuba(scene, scene_dir, transient=True, spp=spp_per_pass)
     mi_scene = mi.load_dict(scene_dict)
     mi.render(mi_scene, seed=99_999, spp=2)  # kernel compilation
     total, spp, spent, passes = None, 0, 0.0, 0
@@ -86,8 +93,9 @@ def main() -> None:
     parser.add_argument("--rows", nargs="*", default=list(ROWS), choices=list(ROWS))
     args = parser.parse_args()
     lines = [
-        "| row | ours: estimator | ours relMSE | mitransient relMSE (spp) | ratio ours/mitransient | time each [s] |",
-        "|---|---|---|---|---|---|",
+        "| row | ours: estimator | ours relMSE | mitransient relMSE (spp) | ratio ours/mitransient | time each [s] "
+        "| ours/reference frame energy |",
+        "|---|---|---|---|---|---|---|",
     ]
     csv = ["row,estimator_media_on_paths,ours_relmse,mitransient_relmse,mitransient_spp,ratio,seconds"]
     for row in args.rows:
@@ -97,16 +105,24 @@ def main() -> None:
         error = ref.frame_error()
         frames, stats = ours(scene_dir, cfg, args.seconds)
         e_ours = error(frames)
-        frames_mt, spp, spent = mitransient_equal_time(scene_dir, args.seconds, cfg.reference.spp_per_pass)
+        frames_mt, spp, spent = mitransient_equal_time(scene_dir, args.seconds, cfg.reference)
         e_mt = error(frames_mt)
         ratio = e_ours / e_mt if e_mt > 0 else float("nan")
+        # Per-frame energy against the long reference, over the frames holding more than 1 % of it.
+        ref_energy = error.reference.sum(axis=(1, 2, 3))
+        energetic = ref_energy > 0.01 * ref_energy.sum()
+        energy_ratio = frames.sum(axis=(1, 2, 3))[energetic] / ref_energy[energetic]
+        energy_text = f"{energy_ratio.min():.3f}-{energy_ratio.max():.3f} over {energetic.sum()} frames"
         estimator = "paths" if stats["path_media"] else "beams"
         print(
             f"{row}: ours ({estimator}, {stats['iterations']} iterations) relMSE {e_ours:.3g}; mitransient "
-            f"({spp} spp, {spent:.0f} s) {e_mt:.3g}; ratio {ratio:.3g}; reference noise {error.reference_noise:.2g}",
+            f"({spp} spp, {spent:.0f} s) {e_mt:.3g}; ratio {ratio:.3g}; reference noise {error.reference_noise:.2g}; "
+            f"ours/reference frame energy {energy_text}",
             flush=True,
         )
-        lines.append(f"| {row} | {estimator} | {e_ours:.3g} | {e_mt:.3g} ({spp}) | {ratio:.3g} | {args.seconds:.0f} |")
+        lines.append(
+            f"| {row} | {estimator} | {e_ours:.3g} | {e_mt:.3g} ({spp}) | {ratio:.3g} | {args.seconds:.0f} | {energy_text} |"
+        )
         csv.append(f"{row},{stats['path_media']},{e_ours:.6g},{e_mt:.6g},{spp},{ratio:.6g},{args.seconds}")
     RESULTS.mkdir(parents=True, exist_ok=True)
     write_text_atomic(RESULTS / "bench_dense.md", "\n".join(lines) + "\n")

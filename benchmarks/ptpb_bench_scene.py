@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import logging
@@ -78,7 +79,8 @@ class Reference:
 
 
 def reference(scene_dir: Path, cfg) -> Reference:
-    """mitransient at ``cfg.transient_spp`` (two halves), cached; ``cfg`` is the config's reference section."""
+    """mitransient at ``cfg.transient_spp`` (two halves), cached; ``cfg`` is the config's reference section
+    (its ``rr_depth``, when set, replaces the scene's, as in the reference stage)."""
     import mitsuba
 
     from render.mitsuba.export import use_variant
@@ -93,6 +95,7 @@ def reference(scene_dir: Path, cfg) -> Reference:
         {
             "scene": _scene_digest(scene_dir),
             "spp": spp,
+            "rr_depth": cfg.rr_depth,
             "seeds": REFERENCE_SEEDS,
             "mitsuba": mitsuba.__version__,
             "mitransient": mitransient.__version__,
@@ -106,6 +109,8 @@ def reference(scene_dir: Path, cfg) -> Reference:
             )
     print(f"rendering the reference: mitransient at {spp} spp, cached in {path} (once; minutes) ...", flush=True)
     scene = Scene.load(scene_dir / "scene.json")
+    if cfg.rr_depth is not None:
+        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
     halves = []
     t0 = time.perf_counter()
     for seed in REFERENCE_SEEDS:
