@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
+from test_ptpb_mitsuba import mitsuba_cube  # noqa: E402
 from test_ptpb_physics import cube_scene  # noqa: E402
 
 from render.ptpb.api import render  # noqa: E402
@@ -36,43 +37,14 @@ def dense_cube(sigma_t: float, albedo: float, g: float, mode: str = "steady", re
 def mitsuba_dense_cube(sigma_t: float, albedo: float, g: float, spp: int, seed: int, rr_depth: int = 200):
     """Mitsuba volpath, unbounded depth. Roulette starts late: with Mitsuba's survival cap of 0.95 a path of
     several hundred collisions is almost never sampled, and the mean comes out low however many samples."""
-    mi = pytest.importorskip("mitsuba")
-    mi.set_variant("llvm_ad_rgb")
-    T = mi.ScalarTransform4f
-    scene = mi.load_dict(
-        {
-            "type": "scene",
-            "integrator": {"type": "volpath", "max_depth": -1, "rr_depth": rr_depth},
-            "sensor": {
-                "type": "perspective",
-                "fov": 40,
-                "fov_axis": "x",
-                "near_clip": 1e-4,
-                "to_world": T().look_at(origin=list(CAMERA), target=[0, 0, 0], up=[0, 1, 0]),
-                "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}},
-                "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
-            },
-            "cube": {
-                "type": "cube",
-                "to_world": T().scale(0.5),
-                "bsdf": {"type": "null"},
-                "interior": {
-                    "type": "homogeneous",
-                    "scale": float(sigma_t),
-                    "sigma_t": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
-                    "albedo": {"type": "rgb", "value": [albedo] * 3},
-                    "phase": {"type": "hg", "g": g},
-                },
-            },
-            "light": {
-                "type": "rectangle",
-                "to_world": T().look_at(origin=[0, 1.5, 0], target=[0, 0, 0], up=[0, 0, 1]) @ T().scale(0.25),
-                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
-                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
-            },
-        }
-    )
-    return np.asarray(mi.render(scene, spp=spp), dtype=np.float64)[..., :3]
+    interior = {
+        "type": "homogeneous",
+        "scale": float(sigma_t),
+        "sigma_t": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+        "albedo": {"type": "rgb", "value": [albedo] * 3},
+        "phase": {"type": "hg", "g": g},
+    }
+    return mitsuba_cube(spp, seed, interior=interior, origin=CAMERA, max_depth=-1, rr_depth=rr_depth)
 
 
 def settings(**kw) -> dict:
@@ -135,8 +107,6 @@ def test_paths_scale_invariance_in_the_semi_infinite_limit():
 
 @pytest.mark.mitsuba
 def test_paths_match_volpath_on_the_translucent_cube():
-    from test_ptpb_mitsuba import mitsuba_cube
-
     ref = mitsuba_cube(spp=8192, seed=3)
     medium = ref.mean(-1) > 1e-3 * ref.mean(-1).max()
     r = render(cube_scene("steady", res=RES), settings(medium_estimator="paths", iterations=4096, max_depth=64))

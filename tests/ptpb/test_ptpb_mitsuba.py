@@ -18,20 +18,37 @@ RES = 24
 MAXD = 64
 
 
-def mitsuba_cube(spp: int, seed: int = 0, film: dict | None = None):
+def mitsuba_cube(
+    spp: int,
+    seed: int = 0,
+    film: dict | None = None,
+    *,
+    interior: dict | None = None,
+    origin=None,
+    max_depth: int = MAXD,
+    rr_depth: int = 5,
+):
     """The cube in Mitsuba volpath (steady image), or with ``film`` (temporal_bins, start_opl,
-    bin_width_opl) in mitransient's transient_prbvolpath: then (frames (T, H, W, 3), steady)."""
+    bin_width_opl) in mitransient's transient_prbvolpath: then (frames (T, H, W, 3), steady).
+    ``interior`` replaces the cube's medium and ``origin`` the camera position."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("llvm_ad_rgb")
     T = mi.ScalarTransform4f
     cam = cube_scene(res=RES)["camera"]
+    if origin is not None:
+        cam["origin"] = origin
     if film is None:
-        integrator = {"type": "volpath", "max_depth": MAXD, "rr_depth": 5}
+        integrator = {"type": "volpath", "max_depth": max_depth, "rr_depth": rr_depth}
         film_dict = {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}, "pixel_format": "rgb"}
     else:
         import mitransient  # noqa: F401  (registers its plugins for the variant set above)
 
-        integrator = {"type": "transient_prbvolpath", "max_depth": MAXD, "rr_depth": 5, "camera_unwarp": False}
+        integrator = {
+            "type": "transient_prbvolpath",
+            "max_depth": max_depth,
+            "rr_depth": rr_depth,
+            "camera_unwarp": False,
+        }
         film_dict = {
             "type": "transient_hdr_film",
             "width": RES,
@@ -59,7 +76,8 @@ def mitsuba_cube(spp: int, seed: int = 0, film: dict | None = None):
                 "type": "cube",
                 "to_world": T().scale(0.5),
                 "bsdf": {"type": "null"},
-                "interior": {
+                "interior": interior
+                or {
                     "type": "homogeneous",
                     "scale": 8.0,
                     "sigma_t": {"type": "rgb", "value": [0.5, 0.75, 1.0]},

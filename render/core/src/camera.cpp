@@ -65,9 +65,7 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
       // path to the path tracer (§12), which estimates the whole rest of it.
       const Medium& m = scene.media[medium];
       const Vec3d sigma_t = m.sigma_t();
-      const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
-      const double s = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel]
-                                            : std::numeric_limits<double>::infinity();
+      const double s = sample_free_flight(sigma_t, rng);
       if (s < dist) {
         PathStart start;
         start.position = pos + dir * s;
@@ -88,9 +86,7 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
       if (st.query_beam_kind == BeamKind::Long) {
         t_q = std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff));
       } else {
-        const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
-        const double ts_sample = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel]
-                                                      : std::numeric_limits<double>::infinity();
+        const double ts_sample = sample_free_flight(sigma_t, rng);
         stop_inside = ts_sample < dist;
         t_q = std::min(ts_sample, dist);
       }
@@ -130,15 +126,8 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
     }
     ++depth_c;
     if (st.max_depth >= 0 && depth_c + 1 > st.max_depth) return;
-    const double n_i = cs.ior(medium), n_t = cs.ior(hit.medium_after);
-    const FresnelResult fr = fresnel_dielectric(-dot(dir, facing), n_i, n_t);
-    if (rng.next_double() < fr.reflectance) {
-      dir = normalize(reflect(dir, facing));
-    } else {
-      dir = refract(dir, facing, n_i, n_t, fr.cos_t);
-      weight = weight * ((n_i / n_t) * (n_i / n_t));  // radiance scaling at refraction (§3)
+    if (fresnel_branch(dir, weight, facing, cs.ior(medium), cs.ior(hit.medium_after), rng.next_double()))
       medium = hit.medium_after;
-    }
     if (depth_c >= st.rr_depth) {
       const double q = std::min(kMaxSurvival, max_component(weight));
       if (!(rng.next_double() < q)) return;

@@ -40,8 +40,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
     if (cs.scattering(medium)) {
       const Medium& m = scene.media[medium];
       const Vec3d sigma_t = m.sigma_t();
-      const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
-      const double s = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel] : inf;
+      const double s = sample_free_flight(sigma_t, rng);
       scattered = s < dist;
       double beam_length = st.photon_beam_kind == BeamKind::Long
                                ? std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff))

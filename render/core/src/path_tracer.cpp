@@ -121,9 +121,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
       if (cs.scattering(medium)) {
         const Medium& m = scene.media[medium];
         const Vec3d sigma_t = m.sigma_t();
-        const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
-        const double s = sigma_t[channel] > 0 ? -std::log1p(-rng.next_double()) / sigma_t[channel]
-                                              : std::numeric_limits<double>::infinity();
+        const double s = sample_free_flight(sigma_t, rng);
         if (s < dist) {
           weight = weight * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
           v = Vertex{};
@@ -180,15 +178,8 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
         break;
       }
       if (!within_depth(interactions)) return;
-      const double n_i = cs.ior(medium), n_t = cs.ior(hit.medium_after);
-      const FresnelResult fr = fresnel_dielectric(-dot(dir, facing), n_i, n_t);
-      if (rng.next_double() < fr.reflectance) {
-        dir = normalize(reflect(dir, facing));
-      } else {
-        dir = refract(dir, facing, n_i, n_t, fr.cos_t);
-        weight = weight * ((n_i / n_t) * (n_i / n_t));  // radiance scaling at refraction (§3)
+      if (fresnel_branch(dir, weight, facing, cs.ior(medium), cs.ior(hit.medium_after), rng.next_double()))
         medium = hit.medium_after;
-      }
       null_chain = false;
       if (interactions >= st.rr_depth) {
         const double q = std::min(st.path_max_survival, max_component(weight));

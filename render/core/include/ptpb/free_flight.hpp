@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "ptpb/rng.hpp"
 #include "ptpb/vec.hpp"
 
 namespace ptpb {
@@ -26,6 +27,14 @@ inline double pdf_mixture(const Vec3d& sigma_t, double s) {
 inline Vec3d transmittance(const Vec3d& sigma_t, double s) {
   return {std::exp(-sigma_t.x * s), std::exp(-sigma_t.y * s), std::exp(-sigma_t.z * s)};
 }
+// A free-flight distance drawn from the channel mixture (§3): a channel picked uniformly, then its
+// exponential; infinite for a channel without extinction (whose second draw is then not made).
+inline double sample_free_flight(const Vec3d& sigma_t, KeyedRng& rng) {
+  const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
+  if (!(sigma_t[channel] > 0)) return std::numeric_limits<double>::infinity();
+  return -std::log1p(-rng.next_double()) / sigma_t[channel];
+}
+
 // Distance at which the largest channel transmittance reaches `cutoff`.
 inline double cutoff_distance(const Vec3d& sigma_t, double cutoff) {
   const double smallest = std::min(sigma_t.x, std::min(sigma_t.y, sigma_t.z));

@@ -81,4 +81,18 @@ inline Vec3d refract(const Vec3d& d, const Vec3d& n_facing, double n_i, double n
   return normalize(d * eta + n_facing * (eta * cos_i - cos_t));
 }
 
+// The camera side's stochastic Fresnel branch (§3, §7): reflects `dir` off the interface with
+// probability F, or refracts it and scales the radiance `weight` by (n_i/n_t)^2. `u` is the branch's
+// uniform draw; returns true when the ray crossed into the far side.
+inline bool fresnel_branch(Vec3d& dir, Vec3d& weight, const Vec3d& facing, double n_i, double n_t, double u) {
+  const FresnelResult fr = fresnel_dielectric(-dot(dir, facing), n_i, n_t);
+  if (u < fr.reflectance) {
+    dir = normalize(reflect(dir, facing));
+    return false;
+  }
+  dir = refract(dir, facing, n_i, n_t, fr.cos_t);
+  weight = weight * ((n_i / n_t) * (n_i / n_t));
+  return true;
+}
+
 }  // namespace ptpb
