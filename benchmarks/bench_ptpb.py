@@ -3,7 +3,7 @@ volpath (steady), one gate-mode pass against T single-gate passes, throughput, t
 memory. Every row comes from one run on one machine; the table names the machine and its load.
 
 Run with `make bench` (or `.venv/bin/python benchmarks/bench_ptpb.py`; `--quick` for a smoke run with
-small budgets). Prints the table and writes benchmarks/results/ptpb.csv, render/core/DESIGN.md and
+small budgets). Prints the table and writes benchmarks/results/ptpb.csv, ptpb.md and
 ptpb_error_vs_time.png. The first run also builds the scene and renders the long reference
 (mitransient at reference.transient_spp, minutes), both cached under benchmarks/results/cache/.
 
@@ -696,7 +696,7 @@ def main() -> None:
     print("\n" + text)
     RESULTS.mkdir(parents=True, exist_ok=True)
     header = "# PTPB benchmark (benchmarks/bench_ptpb.py)\n\n"
-    write_text_atomic(RESULTS / "render/core/DESIGN.md", header + text + "\n")
+    write_text_atomic(RESULTS / "ptpb.md", header + text + "\n")
     write_text_atomic(RESULTS / "ptpb.csv", table.csv())
     reach = lambda curve, ours: curve.seconds_for(ours[-1][1])[1]  # noqa: E731  (spp to our final error)
     plot(
@@ -714,7 +714,7 @@ def main() -> None:
             "prbvolpath, expected V/n": (prb.expected_curve(reach(prb, ours_s)), ":"),
         },
     )
-    print(f"wrote {RESULTS / 'render/core/DESIGN.md'}, ptpb.csv and ptpb_error_vs_time.png")
+    print(f"wrote {RESULTS / 'ptpb.md'}, ptpb.csv and ptpb_error_vs_time.png")
 
 
 if __name__ == "__main__":
