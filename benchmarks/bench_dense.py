@@ -70,17 +70,13 @@ def ours(scene_dir: Path, cfg, seconds: float) -> tuple[np.ndarray, dict]:
 def mitransient_equal_time(scene_dir: Path, seconds: float, cfg) -> tuple[np.ndarray, int, float]:
     """mitransient's transient_prbvolpath in passes of ``cfg.spp_per_pass`` until ``seconds`` of rendering
     (after a warm-up), with the reference section's ``rr_depth`` when set."""
-    import dataclasses
-
     import mitsuba as mi
 
     from render.mitsuba.export import scene_to_mitsuba, use_variant
-    from render.scene.model import Scene
+    from render.mitsuba.stage import reference_scene
 
     use_variant(transient=True)
-    scene = Scene.load(scene_dir / "scene.json")
-    if cfg.rr_depth is not None:
-        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
+    scene = reference_scene(scene_dir, cfg)
     spp_per_pass = cfg.spp_per_pass
     scene_dict = scene_to_mitsuba(scene, scene_dir, transient=True, spp=spp_per_pass)
     mi_scene = mi.load_dict(scene_dict)

@@ -11,7 +11,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import logging
@@ -85,7 +84,7 @@ def reference(scene_dir: Path, cfg) -> Reference:
 
     from render.mitsuba.export import use_variant
     from render.mitsuba.passes import render_transient
-    from render.scene.model import Scene
+    from render.mitsuba.stage import reference_scene
 
     use_variant(transient=True)
     import mitransient
@@ -108,9 +107,7 @@ def reference(scene_dir: Path, cfg) -> Reference:
                 (z["frames_a"], z["frames_b"]), (z["steady_a"], z["steady_b"]), int(z["spp"]), float(z["seconds"])
             )
     print(f"rendering the reference: mitransient at {spp} spp, cached in {path} (once; minutes) ...", flush=True)
-    scene = Scene.load(scene_dir / "scene.json")
-    if cfg.rr_depth is not None:
-        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
+    scene = reference_scene(scene_dir, cfg)
     halves = []
     t0 = time.perf_counter()
     for seed in REFERENCE_SEEDS:

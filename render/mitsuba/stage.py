@@ -27,15 +27,22 @@ class _PassOptions(TypedDict):
     quiet: bool
 
 
+def reference_scene(scene_dir: Path, cfg: ReferenceConfig) -> Scene:
+    """The scene folder's scene as the references render it: with ``cfg.rr_depth``, when set, as their own
+    roulette start (it changes their noise, not what they estimate; render/core/DESIGN.md §12)."""
+    scene = Scene.load(Path(scene_dir) / "scene.json")
+    if cfg.rr_depth is not None:
+        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
+    return scene
+
+
 def run_reference_stage(
     scene_dir: Path, cfg: ReferenceConfig, out_dir: Path, *, seed: int, quiet: bool = False
 ) -> dict:
     """Render ``scene_dir/scene.json`` as ``cfg`` asks and write the reference outputs into ``out_dir``:
     steady.exr/.npy, frames.npy, frames/frame_NNNN.exr, transient_steady.npy and timing.json."""
     scene_dir, out_dir = Path(scene_dir), Path(out_dir)
-    scene = Scene.load(scene_dir / "scene.json")
-    if cfg.rr_depth is not None:  # the references' own roulette start (unbiased either way)
-        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
+    scene = reference_scene(scene_dir, cfg)
     transient = cfg.transient and scene.film.mode == "transient"
     warnings = check_reference_limits(scene, transient=transient, force=cfg.force)
     if cfg.transient and not transient:

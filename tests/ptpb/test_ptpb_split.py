@@ -56,16 +56,16 @@ def assert_close(ours: np.ndarray, reference: np.ndarray) -> None:
     assert relative.max() <= 1e-6, f"largest relative difference {relative.max():.3g}"
 
 
-# The medium's estimators: beams, and where the core has it (the dense-media work), the path tracer; every
-# estimator splats through the same film, so windows must join for each.
-ESTIMATORS = ["beams", "paths"] if "medium_estimator" in PTPBConfig.model_fields else [None]
+# The medium's estimators (render/core/DESIGN.md §12): each splats through the same film, so windows and
+# shards must join for both.
+ESTIMATORS = ["beams", "paths"]
 
 
 @pytest.mark.parametrize("estimator", ESTIMATORS)
 @pytest.mark.parametrize("frame_mode", ["bins", "gate"])
 def test_windows_join_into_the_single_pass_film(tmp_path, frame_mode, estimator):
     scene = medium_and_floor_scene(frame_mode)
-    settings = SETTINGS if estimator is None else {**SETTINGS, "medium_estimator": estimator}
+    settings = {**SETTINGS, "medium_estimator": estimator}
     whole = render(scene, settings)
     assert whole.stats["surface_pairs"] > 0
     assert estimator == "paths" or whole.stats["pair_evaluations"] > 0  # the medium's beams were gathered
@@ -92,7 +92,7 @@ def test_a_window_keeps_only_its_frames_and_early_late_mean_outside_the_whole_fi
 @pytest.mark.parametrize("frame_mode", ["bins", "gate"])
 def test_four_shards_merged_equal_the_single_process_render(tmp_path, frame_mode, estimator):
     scene = medium_and_floor_scene(frame_mode)
-    settings = SETTINGS if estimator is None else {**SETTINGS, "medium_estimator": estimator}
+    settings = {**SETTINGS, "medium_estimator": estimator}
     whole = render(scene, settings)
     folders = [tmp_path / f"shard-{k}" for k in range(4)]
     for k in (2, 0, 3, 1):  # finishing order does not matter

@@ -67,7 +67,7 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
       const Vec3d sigma_t = m.sigma_t();
       const double s = sample_free_flight(sigma_t, rng);
       if (s < dist) {
-        PathStart start;
+        PathVertex start;
         start.position = pos + dir * s;
         start.incoming = dir;
         start.medium = medium;

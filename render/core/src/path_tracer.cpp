@@ -18,17 +18,6 @@ double power_heuristic(double used, double other) {
   return a + b > 0 ? a / (a + b) : 0.0;
 }
 
-// One vertex of the continued path: a scattering event in a medium or a diffuse reflection.
-struct Vertex {
-  Vec3d position{}, incoming{};
-  int medium = kVacuum;  // the medium the outgoing direction enters
-  bool surface = false;
-  Vec3d normal{}, albedo{};  // surface only; the normal faces the side the path came from
-  Vec3d weight{};
-  double tau = 0.0;
-  int interactions = 0;
-};
-
 }  // namespace
 
 std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSettings& st, double radius) {
@@ -46,7 +35,7 @@ std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSetting
   return paths;
 }
 
-void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathStart& start, TileStats& ts) {
+void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathVertex& start, TileStats& ts) {
   const CompiledScene& cs = *p.cs;
   const Scene& scene = cs.scene();
   const RenderSettings& st = *p.st;
@@ -57,13 +46,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
   // A path with k non-null interactions has Mitsuba depth k + 1 (§3).
   auto within_depth = [&](int interactions) { return st.max_depth < 0 || interactions + 1 <= st.max_depth; };
 
-  Vertex v;
-  v.position = start.position;
-  v.incoming = start.incoming;
-  v.medium = start.medium;
-  v.weight = start.weight;
-  v.tau = start.tau;
-  v.interactions = start.interactions;
+  PathVertex v = start;
   for (int guard = 0; guard < 10000000; ++guard) {
     if (!within_depth(v.interactions)) return;
     ++ts.path_vertices;
@@ -124,7 +107,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
         const double s = sample_free_flight(sigma_t, rng);
         if (s < dist) {
           weight = weight * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
-          v = Vertex{};
+          v = PathVertex{};
           v.position = pos + dir * s;
           v.incoming = dir;
           v.medium = medium;
@@ -164,7 +147,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
       ++interactions;
       if (shape.kind == SurfaceKind::Diffuse) {
         if (!(max_component(shape.albedo) > 0)) return;
-        v = Vertex{};
+        v = PathVertex{};
         v.position = pos;
         v.incoming = dir;
         v.medium = hit.medium_before;

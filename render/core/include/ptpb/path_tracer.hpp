@@ -9,20 +9,23 @@
 
 namespace ptpb {
 
-// The camera path's first interaction in a medium that uses paths, where path tracing takes over.
-struct PathStart {
-  Vec3d position{};  // the scattering vertex
-  Vec3d incoming{};  // the camera path's direction of travel into it
-  int medium = kVacuum;
-  Vec3d weight{};        // camera throughput, the vertex's sampling weight σ_s Tr / p included
-  double tau = 0.0;      // camera OPL from the pinhole to the vertex
-  int interactions = 0;  // non-null interactions on the camera side, this vertex included
+// One vertex of a path-traced camera path: a scattering event in a medium or a diffuse reflection.
+// The camera pass makes the first one, where the path first scatters in a medium that uses paths.
+struct PathVertex {
+  Vec3d position{};
+  Vec3d incoming{};      // the camera path's direction of travel into the vertex
+  int medium = kVacuum;  // the medium the outgoing direction enters
+  bool surface = false;
+  Vec3d normal{}, albedo{};  // surface only; the normal faces the side the path came from
+  Vec3d weight{};            // camera throughput, the vertex's own sampling weight included
+  double tau = 0.0;          // camera OPL from the pinhole to the vertex
+  int interactions = 0;      // non-null interactions on the camera side, this vertex included
 };
 
 // Traces the rest of the camera path from `start` with the pixel's stream `rng` and splats every
 // light it connects to. A camera path handed over here never gathers beams again, so a full path is
 // estimated by exactly one technique: the medium of its first camera-side vertex decides.
-void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathStart& start, TileStats& ts);
+void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathVertex& start, TileStats& ts);
 
 // Which media use paths in an iteration with beam radius R (DESIGN.md §12): all with
 // MediumEstimator::Paths, none with Beams, and with Auto those whose shortest mean free path is
