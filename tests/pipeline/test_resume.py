@@ -80,6 +80,9 @@ def digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+ITERATIONS = 400
+
+
 def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path):
     config = tmp_path / "resumed.yaml"
     config.write_text(
@@ -93,7 +96,9 @@ def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path)
             bins=10,
             reference={"steady": False, "transient": False},
             render={
-                "iterations": 80,
+                # Enough iterations that the render cannot finish between the first checkpoint (5) and
+                # the SIGINT: with 80 it sometimes did, on an idle machine, and exited 0.
+                "iterations": ITERATIONS,
                 "snapshot_every": 10,
                 "light_paths_per_iteration": 1000,
                 "checkpoint_every_iterations": 5,
@@ -130,7 +135,7 @@ def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path)
     assert not checkpoint.parent.exists()
     bits = {name: digest(run / "render" / name) for name in ("frames.npy", "steady.npy")}
     stats = json.loads((run / "render" / "stats.json").read_text())
-    assert stats["iterations"] == 80
+    assert stats["iterations"] == ITERATIONS
 
     # The same render without interruption, into another runs folder: byte-equal frames and image.
     fresh = cli(config, "--set", f"runs_dir={tmp_path / 'fresh'}")
