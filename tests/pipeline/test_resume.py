@@ -96,11 +96,13 @@ def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path)
             bins=10,
             reference={"steady": False, "transient": False},
             render={
-                # Enough iterations that the render cannot finish between the first checkpoint (5) and
-                # the SIGINT: with 80 it sometimes did, on an idle machine, and exited 0.
+                # The SIGINT must land while the render runs, between its first checkpoint (5) and its
+                # end. At 1000 light paths the 400 iterations took 0.8 s, and twice in a loaded full
+                # suite the child finished before the poll below saw a checkpoint (it exited 0); 4000
+                # light paths keep that window about 3 s wide.
                 "iterations": ITERATIONS,
                 "snapshot_every": 10,
-                "light_paths_per_iteration": 1000,
+                "light_paths_per_iteration": 4000,
                 "checkpoint_every_iterations": 5,
                 "frame_mode": "gate",
             },
@@ -115,12 +117,13 @@ def test_resume_after_ctrl_c_gives_the_bits_of_an_uninterrupted_render(tmp_path)
         stderr=subprocess.PIPE,
         text=True,
     )
-    deadline = time.monotonic() + 120
-    while not checkpoint.exists() and process.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.05)
+    start = time.monotonic()
+    while not checkpoint.exists() and process.poll() is None and time.monotonic() < start + 120:
+        time.sleep(0.01)
+    seen = f"checkpoint seen: {checkpoint.exists()} after {time.monotonic() - start:.2f} s"
     process.send_signal(signal.SIGINT)
     stdout, stderr = process.communicate(timeout=120)
-    assert process.returncode == 130, stderr
+    assert process.returncode == 130, f"{seen}\n{stdout}\n{stderr}"
     assert "continue with `pipeline run --resume`" in stdout + stderr  # log lines go through tqdm.write
     assert checkpoint.exists() and not (run / "render").exists()
 
