@@ -27,13 +27,19 @@ def mitsuba_cube(
     origin=None,
     max_depth: int = MAXD,
     rr_depth: int = 5,
+    units: float = 1.0,
+    shift=(0.0, 0.0, 0.0),
 ):
     """The cube in Mitsuba volpath (steady image), or with ``film`` (temporal_bins, start_opl,
     bin_width_opl) in mitransient's transient_prbvolpath: then (frames (T, H, W, 3), steady).
-    ``interior`` replaces the cube's medium and ``origin`` the camera position."""
+    ``interior`` replaces the cube's medium and ``origin`` the camera position. ``units`` scene units
+    make a metre (1000: millimetres), and ``shift`` [m] moves the whole scene: the same physical scene, which
+    Mitsuba's single-precision ray offsets (about 9e-5 (1 + |p|) scene units) bias less in dense media when
+    the lit face lies near the origin of a millimetre frame (render/core/DESIGN.md §12)."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("llvm_ad_rgb")
     T = mi.ScalarTransform4f
+    frame = T().scale(units) @ T().translate(list(shift))
     cam = cube_scene(res=RES)["camera"]
     if origin is not None:
         cam["origin"] = origin
@@ -56,8 +62,20 @@ def mitsuba_cube(
             "rfilter": {"type": "box"},
             "temporal_bins": film["temporal_bins"],
             "start_opl": film["start_opl"],
-            "bin_width_opl": film["bin_width_opl"],
+            "bin_width_opl": film["bin_width_opl"] * units,
         }
+        film_dict["start_opl"] *= units
+    medium = dict(
+        interior
+        or {
+            "type": "homogeneous",
+            "scale": 8.0,
+            "sigma_t": {"type": "rgb", "value": [0.5, 0.75, 1.0]},
+            "albedo": {"type": "rgb", "value": [0.9, 0.9, 0.9]},
+            "phase": {"type": "hg", "g": 0.7},
+        }
+    )
+    medium["scale"] = medium["scale"] / units
     scene = mi.load_dict(
         {
             "type": "scene",
@@ -67,27 +85,24 @@ def mitsuba_cube(
                 "type": "perspective",
                 "fov": 40,
                 "fov_axis": "x",
-                "near_clip": 1e-4,
-                "to_world": T().look_at(origin=list(cam["origin"]), target=[0, 0, 0], up=[0, 1, 0]),
+                "near_clip": 1e-4 * units,
+                "to_world": T().look_at(
+                    origin=frame @ mi.ScalarPoint3f(cam["origin"]),
+                    target=frame @ mi.ScalarPoint3f(0, 0, 0),
+                    up=[0, 1, 0],
+                ),
                 "film": film_dict,
                 "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
             },
             "cube": {
                 "type": "cube",
-                "to_world": T().scale(0.5),
+                "to_world": frame @ T().scale(0.5),
                 "bsdf": {"type": "null"},
-                "interior": interior
-                or {
-                    "type": "homogeneous",
-                    "scale": 8.0,
-                    "sigma_t": {"type": "rgb", "value": [0.5, 0.75, 1.0]},
-                    "albedo": {"type": "rgb", "value": [0.9, 0.9, 0.9]},
-                    "phase": {"type": "hg", "g": 0.7},
-                },
+                "interior": medium,
             },
             "light": {
                 "type": "rectangle",
-                "to_world": T().look_at(origin=[0, 1.5, 0], target=[0, 0, 0], up=[0, 0, 1]) @ T().scale(0.25),
+                "to_world": frame @ T().look_at(origin=[0, 1.5, 0], target=[0, 0, 0], up=[0, 0, 1]) @ T().scale(0.25),
                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
             },
