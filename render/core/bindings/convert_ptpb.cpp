@@ -122,6 +122,8 @@ void for_each_stat(Stats& s, Visit&& visit) {
   visit("final_surface_time_half_width", s.final_surface_time_half_width);
   visit("path_vertices", s.path_vertices);
   visit("path_connections", s.path_connections);
+  visit("path_clearance_queries", s.path_clearance_queries);
+  visit("path_clear_flights", s.path_clear_flights);
   visit("path_media", s.path_media);
 }
 

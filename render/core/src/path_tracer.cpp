@@ -18,6 +18,16 @@ double power_heuristic(double used, double other) {
   return a + b > 0 ? a / (a + b) : 0.0;
 }
 
+// Clearance (DESIGN.md §12): a vertex that knows no surface lies within c of it takes a free flight
+// shorter than c without a ray, and keeps c - s; it asks the scene again once c falls below
+// kClearanceRequery mean free paths, searching kClearanceReach of the thinnest channel's mean free
+// paths (at most the scene's diameter).
+constexpr double kClearanceRequery = 1.0;
+constexpr double kClearanceReach = 32.0;
+// Next-event estimation from a vertex whose shadow ray must cross c of its medium (transmittance at most
+// exp(-sigma_t,min c)) is kept with probability min(1, that bound / kNeeBound) and divided by it.
+constexpr double kNeeBound = 0.01;
+
 }  // namespace
 
 std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSettings& st, double radius) {
@@ -51,9 +61,28 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
     if (!within_depth(v.interactions)) return;
     ++ts.path_vertices;
     const double g = v.surface ? 0.0 : scene.media[v.medium].g;
-    // 1. Next-event estimation.
+    // 0. The vertex's clearance: how far it is from every surface (medium vertices only).
+    double clearance = 0.0, nee_keep = 1.0;
+    if (!v.surface) {
+      const Vec3d sigma_t = scene.media[v.medium].sigma_t();
+      clearance = v.clearance;
+      if (clearance < kClearanceRequery / max_component(sigma_t)) {
+        const double thinnest = min_component(sigma_t);
+        const double diameter = 2.0 * cs.sphere_radius();
+        const double reach = thinnest > 0 ? std::min(kClearanceReach / thinnest, diameter) : diameter;
+        // Less a float ulp or so of the position, so that Embree could not have seen a face inside it.
+        const Vec3d& x = v.position;
+        const double margin = 1e-6 * (1.0 + std::max({std::fabs(x.x), std::fabs(x.y), std::fabs(x.z)}));
+        clearance = std::max(0.0, cs.clearance(v.position, reach) - margin);
+        ++ts.path_clearance_queries;
+      }
+      if (clearance > 0 && cs.lights_beyond_surfaces())
+        nee_keep = std::min(1.0, std::exp(-min_component(sigma_t) * clearance) / kNeeBound);
+    }
+    // 1. Next-event estimation (kept with probability nee_keep).
     LightConnection c;
-    if (cs.connect_light(rng, v.position, v.medium, !v.surface, c)) {
+    const bool nee = nee_keep >= 1.0 || rng.next_double() < nee_keep;
+    if (nee && cs.connect_light(rng, v.position, v.medium, !v.surface, c)) {
       double f, pdf_scatter;
       if (v.surface) {
         const double cosine = dot(c.direction, v.normal);
@@ -66,7 +95,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
       }
       if (f > 0) {
         const double mis = c.pdf > 0 ? power_heuristic(c.pdf, pdf_scatter) : 1.0;
-        Vec3d value = v.weight * c.value * (f * mis);
+        Vec3d value = v.weight * c.value * (f * mis / nee_keep);
         if (v.surface) value = value * v.albedo;
         splat.add(v.tau + c.tau - unwarp, value, c.timeless, T);
         ++ts.path_connections;
@@ -99,13 +128,16 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
     bool null_chain = true;  // only index-matched crossings since the vertex: NEE could make this path
     bool next = false;
     for (int hop = 0; hop < 100000 && !next; ++hop) {
-      const SurfaceHit hit = cs.intersect(pos, dir, hop == 0 && !v.surface);
+      const bool scattering = cs.scattering(medium);
+      const Vec3d sigma_t = scattering ? scene.media[medium].sigma_t() : Vec3d{};
+      const double s = scattering ? sample_free_flight(sigma_t, rng) : 0.0;
+      // Inside the clearance sphere no surface can end the flight: no ray needed.
+      const bool clear = hop == 0 && scattering && s < clearance;
+      const SurfaceHit hit = clear ? SurfaceHit{} : cs.intersect(pos, dir, hop == 0 && !v.surface);
       const double dist = hit.valid ? hit.t : std::numeric_limits<double>::infinity();
-      if (cs.scattering(medium)) {
+      if (scattering) {
         const Medium& m = scene.media[medium];
-        const Vec3d sigma_t = m.sigma_t();
-        const double s = sample_free_flight(sigma_t, rng);
-        if (s < dist) {
+        if (clear || s < dist) {
           weight = weight * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
           v = PathVertex{};
           v.position = pos + dir * s;
@@ -114,6 +146,8 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
           v.weight = weight;
           v.tau = tau + m.ior * s;
           v.interactions = interactions + 1;
+          v.clearance = clear ? clearance - s : 0.0;
+          ts.path_clear_flights += clear ? 1 : 0;
           next = true;
           break;
         }

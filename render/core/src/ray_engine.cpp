@@ -2,7 +2,9 @@
 
 #include <embree3/rtcore.h>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -12,6 +14,38 @@ namespace ptpb {
 namespace {
 
 constexpr std::size_t kRayChunk = 4096;
+
+// Squared distance from p to the triangle (a, b, c): the closest point by Voronoi regions
+// (Ericson, Real-Time Collision Detection, 5.1.5), in double.
+double triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  const Vec3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) return dot(ap, ap);
+  const Vec3d bp = p - b;
+  const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) return dot(bp, bp);
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const Vec3d q = a + ab * (d1 / (d1 - d3)) - p;
+    return dot(q, q);
+  }
+  const Vec3d cp = p - c;
+  const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) return dot(cp, cp);
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const Vec3d q = a + ac * (d2 / (d2 - d6)) - p;
+    return dot(q, q);
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const Vec3d q = b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))) - p;
+    return dot(q, q);
+  }
+  const double denom = 1.0 / (va + vb + vc);
+  const Vec3d q = a + ab * (vb * denom) + ac * (vc * denom) - p;
+  return dot(q, q);
+}
 
 void throw_device_error(RTCDevice device, const char* what) {
   const RTCError code = rtcGetDeviceError(device);
@@ -160,6 +194,49 @@ bool RayScene::occluded(const Vec3f& origin, const Vec3f& direction, float tnear
   ray.id = 0;
   rtcOccluded1(impl_->scene, &context, &ray);
   return ray.tfar == -std::numeric_limits<float>::infinity();
+}
+
+namespace {
+
+struct ClosestQuery {
+  const std::vector<std::vector<float>>* vertices;
+  const std::vector<std::vector<std::uint32_t>>* faces;
+  Vec3d point;
+  double distance;
+  double slack;  // how far the float query centre may lie from `point`
+};
+
+bool closest_triangle(RTCPointQueryFunctionArguments* args) {
+  auto* q = static_cast<ClosestQuery*>(args->userPtr);
+  const auto& v = (*q->vertices)[args->geomID];
+  const std::uint32_t* tri = &(*q->faces)[args->geomID][3 * static_cast<std::size_t>(args->primID)];
+  auto corner = [&](int k) { return Vec3d(v[3 * tri[k]], v[3 * tri[k] + 1], v[3 * tri[k] + 2]); };
+  const double d = std::sqrt(triangle_distance2(q->point, corner(0), corner(1), corner(2)));
+  if (!(d < q->distance)) return false;
+  q->distance = d;
+  // Embree culls against a float radius around the float centre: keep the slack so that a triangle
+  // slightly closer to `point` is never cut off.
+  args->query->radius = std::nextafter(static_cast<float>(d + q->slack), std::numeric_limits<float>::infinity());
+  return true;
+}
+
+}  // namespace
+
+double RayScene::closest_distance(const Vec3d& point, double radius) const {
+  require_committed();
+  RTCPointQuery query;
+  query.x = static_cast<float>(point.x);
+  query.y = static_cast<float>(point.y);
+  query.z = static_cast<float>(point.z);
+  query.time = 0.0f;
+  // The float query centre is off by up to half an ulp per axis: widen the search by that much.
+  const double slack = 1e-6 * (1.0 + std::max({std::fabs(point.x), std::fabs(point.y), std::fabs(point.z)}));
+  query.radius = static_cast<float>(radius + slack);
+  RTCPointQueryContext context;
+  rtcInitPointQueryContext(&context);
+  ClosestQuery q{&impl_->vertices, &impl_->faces, point, radius, slack};
+  rtcPointQuery(impl_->scene, &query, &context, closest_triangle, &q);
+  return q.distance;
 }
 
 void RayScene::intersect_batch(const float* origins, const float* directions, std::size_t n, float tnear,

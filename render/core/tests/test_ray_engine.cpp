@@ -68,6 +68,22 @@ TEST_CASE("batched queries agree with single queries at any thread count") {
   CHECK_CLOSE(t1[17], expected, 1e-5);
 }
 
+TEST_CASE("closest distance to the box from inside, outside, near faces, edges and corners") {
+  ptpb::RayScene scene;
+  add_unit_box(scene, 3);
+  scene.commit();
+  using ptpb::Vec3d;
+  CHECK_CLOSE(scene.closest_distance(Vec3d(0.5, 0.5, 0.5), 10.0), 0.5, 1e-12);
+  CHECK_CLOSE(scene.closest_distance(Vec3d(0.3, 0.6, 0.9), 10.0), 0.1, 1e-9);
+  CHECK_CLOSE(scene.closest_distance(Vec3d(0.5, 0.5, 1e-7), 10.0), 1e-7, 1e-9);
+  CHECK_CLOSE(scene.closest_distance(Vec3d(2.0, 0.5, 0.5), 10.0), 1.0, 1e-12);             // face
+  CHECK_CLOSE(scene.closest_distance(Vec3d(2.0, 2.0, 0.5), 10.0), std::sqrt(2.0), 1e-12);  // edge
+  CHECK_CLOSE(scene.closest_distance(Vec3d(2.0, 2.0, 2.0), 10.0), std::sqrt(3.0), 1e-12);  // corner
+  // Bounded: nothing within the radius returns the radius.
+  CHECK_CLOSE(scene.closest_distance(Vec3d(0.5, 0.5, 0.5), 0.25), 0.25, 0.0);
+  CHECK_CLOSE(scene.closest_distance(Vec3d(5.0, 5.0, 5.0), 1.0), 1.0, 0.0);
+}
+
 TEST_CASE("invalid meshes are refused with a reason") {
   ptpb::RayScene scene;
   const float bad[] = {0, 0, 0, 1, 0, 0, 0, NAN, 0};

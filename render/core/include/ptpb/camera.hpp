@@ -43,7 +43,7 @@ struct CameraPass {
 struct TileStats {
   std::uint64_t queries = 0, candidates = 0, pairs = 0, parallel = 0, false_positives = 0;
   std::uint64_t surface_queries = 0, surface_pairs = 0;
-  std::uint64_t path_vertices = 0, path_connections = 0;
+  std::uint64_t path_vertices = 0, path_connections = 0, path_clearance_queries = 0, path_clear_flights = 0;
 
   // Integer totals: the order in which tiles add them does not matter.
   void add_to(RenderStats& s) const {
@@ -56,6 +56,8 @@ struct TileStats {
     s.surface_pairs += surface_pairs;
     s.path_vertices += path_vertices;
     s.path_connections += path_connections;
+    s.path_clearance_queries += path_clearance_queries;
+    s.path_clear_flights += path_clear_flights;
   }
 };
 

@@ -51,6 +51,11 @@ class CompiledScene {
   SurfaceHit intersect(const Vec3d& origin, const Vec3d& direction, bool from_medium = false) const;
   double ior(int medium) const { return medium == kVacuum ? scene_.ambient_ior : scene_.media[medium].ior; }
   bool scattering(int medium) const { return medium != kVacuum && has_scattering_[medium]; }
+  // Distance from p to the nearest surface, or `reach` when none is closer (DESIGN.md §12, clearance).
+  double clearance(const Vec3d& p, double reach) const { return rays_.closest_distance(p, reach); }
+  // Whether every light lies on or beyond a surface, so that a shadow ray from a medium vertex crosses
+  // at least its clearance of that medium (no point or spot light sits inside a medium).
+  bool lights_beyond_surfaces() const { return scene_.point_lights.empty(); }
   bool attenuating(int medium) const { return medium != kVacuum && has_extinction_[medium]; }
 
   // Starts one light path: picks a light by power and samples its emission (DESIGN.md §3).

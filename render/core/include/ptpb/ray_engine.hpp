@@ -52,6 +52,9 @@ class RayScene {
                 float tfar = std::numeric_limits<float>::infinity()) const;
   bool occluded(const Vec3f& origin, const Vec3f& direction, float tnear = 0.0f,
                 float tfar = std::numeric_limits<float>::infinity()) const;
+  // Distance from `point` to the nearest triangle of any mesh, or `radius` when none lies closer
+  // (an Embree point query bounded by `radius`, exact in double on the float vertices).
+  double closest_distance(const Vec3d& point, double radius) const;
 
   // Batched queries over n rays stored as n x 3 arrays; `threads` = 0 uses all hardware threads.
   void intersect_batch(const float* origins, const float* directions, std::size_t n, float tnear, const float* tfar,

@@ -36,9 +36,10 @@ struct RenderStats {
   // Surface photons (§7): photons stored, gathers at diffuse camera hits, accepted photon terms.
   std::uint64_t surface_photons = 0, surface_queries = 0, surface_pairs = 0;
   double time_surface_build_s = 0;
-  // Path tracing in dense media (§12): vertices traced, light connections splatted, and how many
-  // media used paths in the last iteration.
-  std::uint64_t path_vertices = 0, path_connections = 0;
+  // Path tracing in dense media (§12): vertices traced, light connections splatted, clearance queries
+  // made and free flights that ended inside a clearance sphere (no ray traced), and how many media
+  // used paths in the last iteration.
+  std::uint64_t path_vertices = 0, path_connections = 0, path_clearance_queries = 0, path_clear_flights = 0;
   int path_media = 0;
   double final_surface_radius = 0, final_surface_time_half_width = 0;
   double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check

@@ -69,6 +69,10 @@ template <typename T>
 constexpr T max_component(const Vec3<T>& v) {
   return v.x > v.y ? (v.x > v.z ? v.x : v.z) : (v.y > v.z ? v.y : v.z);
 }
+template <typename T>
+constexpr T min_component(const Vec3<T>& v) {
+  return v.x < v.y ? (v.x < v.z ? v.x : v.z) : (v.y < v.z ? v.y : v.z);
+}
 
 using Vec3f = Vec3<float>;
 using Vec3d = Vec3<double>;
