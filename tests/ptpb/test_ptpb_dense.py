@@ -228,7 +228,7 @@ def test_dense_cube_steady_mean_against_volpath(sigma_t, g):
 @pytest.mark.parametrize(("sigma_t", "g"), [(400.0, 0.0), (400.0, 0.85), (2000.0, 0.0), (2000.0, 0.85)])
 def test_dense_cube_frames_against_mitransient(sigma_t, g):
     """Issue 16: per-frame energy within 3 % of mitransient's for every frame holding more than 1 % of it
-    (plus the reference's measured bias at sigma_t = 2000, see TOLERANCE)."""
+    (plus the reference's measured bias at sigma_t = 2000, see TOLERANCE, and the measured noise)."""
     film = {"frame_mode": "bins", "temporal_bins": 40, "start_opl": 3.0, "bin_width_opl": 0.1}
     interior = {
         "type": "homogeneous",
@@ -266,7 +266,10 @@ def test_dense_cube_frames_against_mitransient(sigma_t, g):
         f"{ref_error.max():.3f}, ours up to {ours_error.max():.3f}"
     )
     assert held.sum() >= 3
-    np.testing.assert_allclose(ratio, 1.0, atol=0.03 + TOLERANCE[sigma_t] - 0.02)
+    # The last frames hold about 1 % each and carry 1-2 % of noise on either side at g = 0.85: allow three
+    # standard errors of the difference on top of the 3 %.
+    noise = 3 * np.hypot(ref_error, ours_error)
+    assert np.all(np.abs(ratio - 1) <= 0.03 + TOLERANCE[sigma_t] - 0.02 + noise), (ratio, noise)
 
 
 @pytest.mark.mitsuba
