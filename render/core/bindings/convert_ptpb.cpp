@@ -123,6 +123,9 @@ void for_each_stat(Stats& s, Visit&& visit) {
   visit("path_vertices", s.path_vertices);
   visit("path_connections", s.path_connections);
   visit("path_media", s.path_media);
+  visit("specular_beams", s.specular_beams);
+  visit("specular_pairs", s.specular_pairs);
+  visit("final_specular_radius", s.final_specular_radius);
 }
 
 RenderStats parse_stats(const py::dict& d) {

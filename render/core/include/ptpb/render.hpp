@@ -40,6 +40,10 @@ struct RenderStats {
   // media used paths in the last iteration.
   std::uint64_t path_vertices = 0, path_connections = 0;
   int path_media = 0;
+  // Delta lights behind dielectrics (§12): specular-delta beams stored, pairs accepted, and the largest
+  // of their per-medium radii in the last iteration that stored any.
+  std::uint64_t specular_beams = 0, specular_pairs = 0;
+  double final_specular_radius = 0;
   double final_surface_radius = 0, final_surface_time_half_width = 0;
   double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check
   Schedule schedule;                                         // the bandwidth schedule this run resolved and used (§6)
