@@ -180,7 +180,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
             }
             // Only the calling thread may talk to Python (signals are delivered to the main thread).
             if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5)
-              report(int(it), R, T, beams.size(), r_s, photons.size());
+              report(int(it), R, T, beams.size() + specular_beams.size(), r_s, photons.size());
           }
           tile_films.give_back(std::move(tile));
         });
@@ -198,7 +198,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     stats.final_surface_radius = photon_grid.radius();
     stats.final_surface_time_half_width = T_s;
     if (settings.snapshot_every > 0 && (it + 1) % settings.snapshot_every == 0) add_snapshot(state, it + 1, elapsed());
-    report(int(it + 1), R, T, beams.size(), r_s, photons.size());
+    report(int(it + 1), R, T, beams.size() + specular_beams.size(), r_s, photons.size());
     // No checkpoint after the last planned iteration: the result itself follows at once.
     const bool due =
         (settings.checkpoint_every_iterations > 0 && (it + 1) % settings.checkpoint_every_iterations == 0) ||

@@ -18,7 +18,7 @@ struct Progress {
   double elapsed_s = 0.0;
   double radius = 0.0;  // R_i of the iteration in flight or just done
   double time_half_width = 0.0;
-  std::uint64_t beams = 0;
+  std::uint64_t beams = 0;      // beams stored in the iteration, specular-delta beams (§12) included
   double surface_radius = 0.0;  // r_i of the surface photons
   std::uint64_t surface_photons = 0;
 };
