@@ -212,9 +212,10 @@ def test_bubbly_ice_block_against_mitsuba_disk_sun_as_it_shrinks(tmp_path):
         scene = dataclasses.replace(Scene.load(folder / "scene.json"), rr_depth=200)
         spp = int(2048 * DISKS_DEG[0] / diameter)  # the hits fall with the disk's angular size: more samples
         start = time.perf_counter()
+        # A pass's seed is the sampler's seed plus the pass index, so runs seeded 10^4 apart share no pass.
         means = [
-            float(render_steady(scene, folder, spp=spp, spp_per_pass=1024, seed=seed, quiet=True)[0].mean())
-            for seed in range(8)
+            float(render_steady(scene, folder, spp=spp, spp_per_pass=1024, seed=10_000 * k, quiet=True)[0].mean())
+            for k in range(8)
         ]
         reference, reference_error = mean_and_error(means)
         references.append((reference, reference_error))
@@ -224,9 +225,9 @@ def test_bubbly_ice_block_against_mitsuba_disk_sun_as_it_shrinks(tmp_path):
             f"disk {diameter:g} deg: Mitsuba {reference:.5f} +- {reference_error:.5f} (8 x {spp} spp, "
             f"{time.perf_counter() - start:.0f} s), ours / Mitsuba {ratio:.4f} +- {error:.4f}"
         )
-        # 1 within three standard errors, plus 2 % for the disk's own size and our kernel.
+        # 1 within three standard errors, plus 2 % for the disk's own size and our kernel. Mitsuba's error
+        # grows as the disk shrinks (measured 1.3 %, 2.3 %, 4.2 % at 8, 4, 2 degrees with these samples).
         assert abs(ratio - 1) < 3 * error + 0.02
-        assert error < 0.04  # informative: a loss of a tenth of the light cannot pass
     # Mitsuba's estimates at the four sizes pooled by inverse variance (the disk's size changes the light
     # by well under the noise here): ours over that, within three standard errors plus 1 %.
     weights = np.array([1 / e**2 for _, e in references])
@@ -235,4 +236,5 @@ def test_bubbly_ice_block_against_mitsuba_disk_sun_as_it_shrinks(tmp_path):
     ratio = ours / pooled
     error = ratio * math.hypot(ours_error / ours, pooled_error / pooled)
     print(f"pooled: ours / Mitsuba {ratio:.4f} +- {error:.4f}")
+    assert error < 0.025  # informative: a loss of a tenth of the light cannot pass
     assert abs(ratio - 1) < 3 * error + 0.01
