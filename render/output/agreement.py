@@ -27,14 +27,22 @@ class Agreement:
     sigma: tuple[float, float, float]
 
     @property
+    def reference_black(self) -> bool:
+        """Ours has light in a channel where the reference has none (ratio +inf): a delta light behind a
+        dielectric in Mitsuba, say (render/core/DESIGN.md §11). Both black (nan) is no disagreement."""
+        return any(np.isposinf(r) for r in self.ratio)
+
+    @property
     def disagrees(self) -> bool:
-        return any(
+        return self.reference_black or any(
             abs(r - 1.0) > SIGMAS * s and abs(r - 1.0) > TOLERANCE
             for r, s in zip(self.ratio, self.sigma)
             if np.isfinite(r)
         )
 
     def text(self) -> str:
+        if self.reference_black:
+            return "DISAGREES: the reference is black where ours is not (ours / reference = ∞ in some channel)"
         parts = " / ".join(f"{r:.3f} ± {s:.3f}" for r, s in zip(self.ratio, self.sigma))
         verdict = "DISAGREES" if self.disagrees else "agrees"
         return f"{verdict}: ours / reference {parts} (R / G / B; flagged beyond {SIGMAS:g}σ and {TOLERANCE:.0%})"
@@ -57,11 +65,11 @@ def agreement(ours: np.ndarray, reference: np.ndarray, tiles: int = TILES) -> Ag
     a, b = _tile_sums(ours, tiles), _tile_sums(reference, tiles)
     n = len(a)
     total_a, total_b = a.sum(axis=0), b.sum(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # a black reference gives inf, both black nan
         ratio = total_a / total_b
         leave_one_out = (total_a - a) / (total_b - b)  # (n, 3)
-    spread = leave_one_out - leave_one_out.mean(axis=0)
-    sigma = np.sqrt((n - 1) / n * (spread**2).sum(axis=0))
+        spread = leave_one_out - leave_one_out.mean(axis=0)
+        sigma = np.sqrt((n - 1) / n * (spread**2).sum(axis=0))
     return Agreement(
         tuple(float(x) for x in ratio),  # type: ignore[arg-type]
         tuple(float(x) for x in sigma),  # type: ignore[arg-type]

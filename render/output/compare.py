@@ -149,8 +149,15 @@ HEADINGS = {
 
 
 def _ratio_text(ours: dict[str, Any], reference: dict[str, Any]) -> str:
-    ratios = [ours[c] / reference[c] if reference[c] else float("nan") for c in ("mean_r", "mean_g", "mean_b")]
-    return " / ".join(f"{r:.3f}" for r in ratios)
+    """Per-channel ours / reference; ∞ where the reference is black and ours is not (a delta light behind a
+    dielectric in Mitsuba), nan where both are."""
+
+    def one(c: str) -> str:
+        if reference[c]:
+            return f"{ours[c] / reference[c]:.3f}"
+        return "∞" if ours[c] else "nan"
+
+    return " / ".join(one(c) for c in ("mean_r", "mean_g", "mean_b"))
 
 
 def key_results(rows: list[dict[str, Any]]) -> list[str]:

@@ -50,6 +50,16 @@ def test_a_channel_is_flagged_only_beyond_3_sigma_and_3_percent(truth, bias, noi
     assert verdict.ratio[0] == pytest.approx(bias, abs=max(0.01, 4 * verdict.sigma[0]))
 
 
+def test_a_black_reference_is_flagged_not_passed(truth):
+    """Mitsuba renders a delta sun behind a dielectric black (configs/showcase/bubbly_ice_sun.yaml): the ratio
+    is infinite, which must read as a disagreement, while two black images are no disagreement."""
+    verdict = agreement(truth, np.zeros_like(truth))
+    assert verdict.reference_black and verdict.disagrees
+    assert "reference is black" in verdict.text()
+    both_black = agreement(np.zeros_like(truth), np.zeros_like(truth))
+    assert not both_black.reference_black and not both_black.disagrees
+
+
 def test_the_compare_stage_flags_a_biased_render_loudly(tmp_path, caplog):
     from render.output.compare import run_compare_stage
 

@@ -125,6 +125,9 @@ void for_each_stat(Stats& s, Visit&& visit) {
   visit("path_clearance_queries", s.path_clearance_queries);
   visit("path_clear_flights", s.path_clear_flights);
   visit("path_media", s.path_media);
+  visit("specular_beams", s.specular_beams);
+  visit("specular_pairs", s.specular_pairs);
+  visit("final_specular_radius", s.final_specular_radius);
 }
 
 RenderStats parse_stats(const py::dict& d) {

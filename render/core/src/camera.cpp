@@ -66,6 +66,18 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
       const Medium& m = scene.media[medium];
       const Vec3d sigma_t = m.sigma_t();
       const double s = sample_free_flight(sigma_t, rng);
+      // Light from a delta light that crossed a dielectric before it first scattered cannot be reached
+      // by the path tracer's next-event estimation: it is estimated here, by the specular-delta beams
+      // along the segment, for every first camera vertex the segment holds, and by nothing else
+      // (§12, "Delta lights behind dielectrics").
+      if (!p.specular_beams.beams->empty() && (st.max_depth < 0 || depth_c + 2 <= st.max_depth)) {
+        double t_q = st.query_beam_kind == BeamKind::Long
+                         ? std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff))
+                         : std::min(s, dist);
+        if (!std::isfinite(t_q)) t_q = p.far_length;
+        ts.specular_pairs +=
+            gather(p, p.specular_beams, splat, pos, dir, t_q, medium, weight, tau_c, depth_c, cand, ts);
+      }
       if (s < dist) {
         PathVertex start;
         start.position = pos + dir * s;
@@ -92,7 +104,7 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
       }
       if (!std::isfinite(t_q)) t_q = p.far_length;
       if (st.max_depth < 0 || depth_c + 2 <= st.max_depth)
-        gather(p, splat, pos, dir, t_q, medium, weight, tau_c, depth_c, cand, ts);
+        ts.pairs += gather(p, p.beams, splat, pos, dir, t_q, medium, weight, tau_c, depth_c, cand, ts);
       if (stop_inside || !hit.valid) return;
       weight = weight * transmittance(sigma_t, dist);
       if (st.query_beam_kind == BeamKind::Short) weight = weight / survival_mixture(sigma_t, dist);

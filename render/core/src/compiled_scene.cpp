@@ -123,6 +123,10 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
     total_power_ += e.power;
     light_cdf_.push_back(total_power_);
   }
+  bool dielectric = false;
+  for (const Shape& s : scene.shapes) dielectric |= s.kind == SurfaceKind::Dielectric;
+  for (const LightEntry& e : lights_)
+    has_specular_delta_light_ |= dielectric && (e.kind == 0 || e.kind == 2) && e.power > 0;
   area_light_pick_.assign(scene.shapes.size(), 0.0);
   if (total_power_ > 0) {
     for (const LightEntry& e : lights_) {
@@ -194,6 +198,7 @@ bool CompiledScene::sample_emission(KeyedRng& rng, LightSample& out) const {
     out.direction = sample_uniform_sphere(u1, u2);
     out.power = l.intensity * (4.0 * kPi / pick);
     out.medium = l.medium;
+    out.delta = true;
   } else if (e.kind == 1) {
     const Shape& s = scene_.shapes[e.index];
     Vec3d normal;
@@ -224,6 +229,7 @@ bool CompiledScene::sample_emission(KeyedRng& rng, LightSample& out) const {
     out.direction = -s;
     out.power = l.irradiance * (kPi * sphere_radius_ * sphere_radius_ / pick);
     out.medium = kVacuum;
+    out.delta = true;
   }
   return true;
 }

@@ -12,21 +12,24 @@
 namespace ptpb {
 
 // Beam×beam estimate along the query segment [0, t_q] of one camera segment (§4, §5).
-void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, const Vec3d& dir, double t_q, int medium,
-            const Vec3d& weight, double tau_c, int depth_c, std::vector<std::uint32_t>& cand, TileStats& ts) {
+std::uint64_t gather(const CameraPass& p, const BeamLayer& layer, const PixelSplat& splat, const Vec3d& pos,
+                     const Vec3d& dir, double t_q, int medium, const Vec3d& weight, double tau_c, int depth_c,
+                     std::vector<std::uint32_t>& cand, TileStats& ts) {
   const Scene& scene = p.cs->scene();
   const RenderSettings& st = *p.st;
   const Medium& m = scene.media[medium];
   const Vec3d sigma_t = m.sigma_t();
   const double n = m.ior;
   cand.clear();
-  p.accel->query(pos, dir, t_q, cand);
+  layer.accel->query(pos, dir, t_q, cand);
   ++ts.queries;
   // Canonical order makes the sum independent of traversal and thread count (§9): the structures
   // hand their candidates over sorted (BeamAccel::query), and only near-parallel ones can repeat.
   cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
   ts.candidates += cand.size();
-  const std::vector<Beam>& beams = *p.beams;
+  const std::vector<Beam>& beams = *layer.beams;
+  std::uint64_t accepted = 0;
+  const double radius = layer.radius_in(medium);
   const bool short_query = st.query_beam_kind == BeamKind::Short;
   const Vec3d query_weight = weight * m.sigma_s * p.inv_paths;
   for (std::uint32_t bi : cand) {
@@ -37,7 +40,7 @@ void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, cons
     }
     if (st.max_depth >= 0 && b.light_depth + depth_c + 2 > st.max_depth) continue;
     const ClosestApproach ca = closest_approach(pos, dir, b.origin, b.direction);
-    const PairTest verdict = test_beam_pair(ca, t_q, b.length, p.radius, st.parallel_guard_sin2);
+    const PairTest verdict = test_beam_pair(ca, t_q, b.length, radius, st.parallel_guard_sin2);
     if (verdict == PairTest::Parallel) {
       ++ts.parallel;
       continue;
@@ -46,7 +49,7 @@ void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, cons
       ++ts.false_positives;
       continue;
     }
-    const double k_r = spatial_kernel_1d(st.spatial_kernel, ca.u, p.radius);
+    const double k_r = spatial_kernel_1d(st.spatial_kernel, ca.u, radius);
     const double phase = hg_eval(dot(b.direction, -dir), m.g);
     // Tr(t_c) Tr(s_b) in one exponential per channel; short beams divide by their survival.
     const Vec3d tr = transmittance(sigma_t, ca.t + ca.s);
@@ -57,8 +60,9 @@ void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, cons
     const Vec3d value = query_weight * tr * b.power * scalar;
     const double tau = b.tau0 + n * ca.s + (st.camera_unwarp ? 0.0 : n * ca.t + tau_c);
     splat.add(tau, value, b.timeless, p.time_half_width);
-    ++ts.pairs;
+    ++accepted;
   }
+  return accepted;
 }
 
 // Surface photon estimate at a diffuse camera hit x (§7):

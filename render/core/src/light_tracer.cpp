@@ -29,6 +29,10 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
   int medium = ls.medium, depth = 0;
   double tau = 0.0;
   bool at_vertex = false;  // the ray leaves a scattering vertex inside a medium
+  // The path's prefix runs from the emitter to its first scattering or diffuse vertex. A delta light's
+  // path whose prefix meets a dielectric is light that next-event estimation cannot connect to
+  // (DESIGN.md §12, "Delta lights behind dielectrics"); only such paths leave beams in media on paths.
+  bool in_prefix = true, specular_delta = false;
   for (int guard = 0; guard < 1000000; ++guard) {
     // A beam or surface photon at light depth d forms paths of depth >= d + 2 (§3; gather.cpp
     // gives the count for photons).
@@ -46,8 +50,8 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
                                ? std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff))
                                : std::min(s, dist);
       if (!std::isfinite(beam_length)) beam_length = far_length;
-      const bool store = path_media.empty() || !path_media[medium];
-      if (store && beam_length > 0 && max_component(beta) > 0) {
+      const bool on_paths = !path_media.empty() && path_media[medium];
+      if ((!on_paths || specular_delta) && beam_length > 0 && max_component(beta) > 0) {
         Beam b;
         b.origin = pos;
         b.direction = dir;
@@ -59,7 +63,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
         b.light_depth = depth;
         b.timeless = ls.timeless;
         b.path = static_cast<std::uint32_t>(path_index);
-        out.beams.push_back(b);
+        (on_paths ? out.specular_beams : out.beams).push_back(b);
       }
       if (scattered) {
         beta = beta * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
@@ -77,6 +81,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
     tau += cs.ior(medium) * travel;
     at_vertex = scattered;
     if (scattered) {
+      in_prefix = false;
       pos = pos + dir * travel;
       ++depth;
       const double u1 = rng.next_double(), u2 = rng.next_double();
@@ -106,6 +111,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
       }
       ++depth;
       if (shape.kind == SurfaceKind::Dielectric) {
+        specular_delta = specular_delta || (in_prefix && ls.delta);
         const double n_i = cs.ior(medium), n_t = cs.ior(hit.medium_after);
         const double cos_i = -dot(dir, facing);
         const FresnelResult fr = fresnel_dielectric(cos_i, n_i, n_t);
@@ -116,6 +122,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
           medium = hit.medium_after;
         }
       } else {
+        in_prefix = false;
         beta = beta * shape.albedo;
         if (!(max_component(beta) > 0)) return;
         const double u1 = rng.next_double(), u2 = rng.next_double();
@@ -131,8 +138,7 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
 }
 
 void trace_light_paths(const CompiledScene& cs, const RenderSettings& settings, std::uint64_t iteration,
-                       std::vector<Beam>& beams, std::vector<SurfacePhoton>& photons,
-                       const std::vector<char>& path_media) {
+                       LightRecords& out, const std::vector<char>& path_media) {
   const std::uint64_t M = settings.light_paths_per_iteration;
   constexpr std::size_t kPathChunk = 256;
   constexpr int kChunksPerThread = 16;  // light-path chunks per thread in one group
@@ -140,8 +146,9 @@ void trace_light_paths(const CompiledScene& cs, const RenderSettings& settings, 
   // records exist twice (DESIGN.md §9 "Memory").
   const std::size_t path_chunks = (M + kPathChunk - 1) / kPathChunk;
   const std::size_t group = std::size_t(kChunksPerThread) * resolve_thread_count(settings.threads);
-  beams.clear();
-  photons.clear();
+  out.beams.clear();
+  out.photons.clear();
+  out.specular_beams.clear();
   for (std::size_t g0 = 0; g0 < path_chunks; g0 += group) {
     const std::size_t g1 = std::min(path_chunks, g0 + group);
     std::vector<LightRecords> chunk_records(g1 - g0);
@@ -152,24 +159,28 @@ void trace_light_paths(const CompiledScene& cs, const RenderSettings& settings, 
           trace_light_path(cs, settings, iteration, j, chunk_records[c], path_media);
       }
     });
-    if (g0 == 0 && beams.capacity() == 0) {
+    if (g0 == 0 && out.beams.capacity() == 0 && out.specular_beams.capacity() == 0) {
       // Room for the whole iteration at the first group's rate, with a margin: capacity that is
       // never written costs address space, not memory, while a vector grown by doubling leaves
       // freed buffers behind and raises the peak memory (measured by make bench's memory rows).
-      std::size_t first_beams = 0, first_photons = 0;
+      std::size_t first_beams = 0, first_photons = 0, first_specular = 0;
       for (const auto& rec : chunk_records) {
         first_beams += rec.beams.size();
         first_photons += rec.photons.size();
+        first_specular += rec.specular_beams.size();
       }
       const double scale = 1.25 * double(M) / double(std::min<std::uint64_t>(M, g1 * kPathChunk));
-      beams.reserve(std::size_t(scale * double(first_beams)) + 1024);
-      photons.reserve(std::size_t(scale * double(first_photons)) + 1024);
+      out.beams.reserve(std::size_t(scale * double(first_beams)) + 1024);
+      out.photons.reserve(std::size_t(scale * double(first_photons)) + 1024);
+      out.specular_beams.reserve(std::size_t(scale * double(first_specular)) + 1024);
     }
     for (auto& rec : chunk_records) {
-      beams.insert(beams.end(), rec.beams.begin(), rec.beams.end());
-      photons.insert(photons.end(), rec.photons.begin(), rec.photons.end());
+      out.beams.insert(out.beams.end(), rec.beams.begin(), rec.beams.end());
+      out.photons.insert(out.photons.end(), rec.photons.begin(), rec.photons.end());
+      out.specular_beams.insert(out.specular_beams.end(), rec.specular_beams.begin(), rec.specular_beams.end());
       std::vector<Beam>().swap(rec.beams);
       std::vector<SurfacePhoton>().swap(rec.photons);
+      std::vector<Beam>().swap(rec.specular_beams);
     }
   }
 }

@@ -45,6 +45,18 @@ std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSetting
   return paths;
 }
 
+std::vector<double> specular_beam_radii(const CompiledScene& cs, const RenderSettings& st,
+                                        const std::vector<char>& path_media, double radius, double initial_radius) {
+  const Scene& scene = cs.scene();
+  std::vector<double> radii(scene.media.size(), 0.0);
+  for (std::size_t m = 0; m < scene.media.size(); ++m) {
+    if (!path_media[m]) continue;
+    const double unbiased = st.beam_radius_mfp / max_component(scene.media[m].sigma_t());
+    radii[m] = std::min(initial_radius, unbiased) * (radius / initial_radius);
+  }
+  return radii;
+}
+
 void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathVertex& start, TileStats& ts) {
   const CompiledScene& cs = *p.cs;
   const Scene& scene = cs.scene();

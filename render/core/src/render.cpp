@@ -66,6 +66,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
   TileFilmPool tile_films(settings.tile_size, F);
 
   auto accel = make_beam_accel(settings.accel, settings.grid_resolution, settings.dice_length);
+  auto specular_accel = make_beam_accel(settings.accel, settings.grid_resolution, settings.dice_length);
   const std::thread::id caller = std::this_thread::get_id();
   std::atomic<bool> cancel{false};
   auto last_report = Clock::now();
@@ -92,8 +93,10 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     if (!progress(pr)) cancel.store(true);
   };
 
-  std::vector<Beam> beams;
-  std::vector<SurfacePhoton> photons;
+  LightRecords records;
+  std::vector<Beam>& beams = records.beams;
+  std::vector<SurfacePhoton>& photons = records.photons;
+  std::vector<Beam>& specular_beams = records.specular_beams;
   SurfacePhotonGrid photon_grid;
   for (long it = stats.iterations_done; it < max_iterations && !cancel.load(); ++it) {
     if (settings.time_budget_s > 0 && it > 0 && elapsed() >= settings.time_budget_s) break;
@@ -104,28 +107,41 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     surface_bandwidths(film.mode, stats.schedule, it, r_s, T_s);
 
     // 0. Which media path trace in this iteration (§12). Light paths are needed only where they can
-    // leave a record: a beam in a medium that keeps beams, or a photon on a diffuse surface.
+    // leave a record: a beam in a medium that keeps beams, a photon on a diffuse surface, or a
+    // specular-delta beam in a medium on paths (a delta light and a dielectric in the scene).
     const std::vector<char> path_media = media_using_paths(cs, settings, R);
-    bool beam_media = false;
-    for (std::size_t m = 0; m < path_media.size(); ++m) beam_media |= cs.scattering(int(m)) && !path_media[m];
+    bool beam_media = false, any_path_media = false;
+    for (std::size_t m = 0; m < path_media.size(); ++m) {
+      beam_media |= cs.scattering(int(m)) && !path_media[m];
+      any_path_media |= path_media[m] != 0;
+    }
+    const std::vector<double> specular_radii =
+        specular_beam_radii(cs, settings, path_media, R, stats.schedule.initial_beam_radius);
+    double specular_radius = 0.0;
+    for (double r : specular_radii) specular_radius = std::max(specular_radius, r);
 
     // 1. Light paths, in fixed chunks of path indices; beams and photons kept in path order (§9).
     auto t0 = Clock::now();
-    const bool light_pass = beam_media || cs.has_diffuse_reflectors();
+    const bool light_pass =
+        beam_media || cs.has_diffuse_reflectors() || (any_path_media && cs.has_specular_delta_light());
     if (light_pass) {
-      trace_light_paths(cs, settings, static_cast<std::uint64_t>(it), beams, photons, path_media);
+      trace_light_paths(cs, settings, static_cast<std::uint64_t>(it), records, path_media);
     } else {
       beams.clear();
       photons.clear();
+      specular_beams.clear();
     }
     // Beams in space order (a deterministic function of the path-ordered beams): the structure's
     // leaves and the gather then read neighbouring records.
     sort_beams_spatially(beams, settings.threads);
+    sort_beams_spatially(specular_beams, settings.threads);
     stats.time_light_s += seconds_since(t0);
 
     // 2. The beam structure, with this iteration's radius.
     t0 = Clock::now();
     accel->build(beams, R, settings.threads);
+    // Specular-delta beams: one structure at the largest of their per-medium radii (§12).
+    specular_accel->build(specular_beams, specular_beams.empty() ? R : specular_radius, settings.threads);
     stats.time_build_s += seconds_since(t0);
     t0 = Clock::now();
     photon_grid.build(photons, r_s);
@@ -135,10 +151,9 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     t0 = Clock::now();
     if (it >= settings.compensated_sums_from && F > 0 && !settings.keep_sums && state.frames_carry.empty())
       state.frames_carry.assign(frame_values, 0.0f);
-    pass.beams = &beams;
-    pass.accel = accel.get();
+    pass.beams = BeamLayer{&beams, accel.get(), accel->radius(), nullptr};
+    pass.specular_beams = BeamLayer{&specular_beams, specular_accel.get(), specular_accel->radius(), &specular_radii};
     pass.iteration = static_cast<std::uint64_t>(it);
-    pass.radius = accel->radius();
     pass.time_half_width = T;
     pass.photons = &photons;
     pass.photon_grid = &photon_grid;
@@ -165,7 +180,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
             }
             // Only the calling thread may talk to Python (signals are delivered to the main thread).
             if (std::this_thread::get_id() == caller && seconds_since(last_report) > 0.5)
-              report(int(it), R, T, beams.size(), r_s, photons.size());
+              report(int(it), R, T, beams.size() + specular_beams.size(), r_s, photons.size());
           }
           tile_films.give_back(std::move(tile));
         });
@@ -173,7 +188,9 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     stats.iterations_done = int(it + 1);
     if (light_pass) stats.light_paths += M;
     stats.beams += beams.size();
-    stats.accel_references += accel->references();
+    stats.specular_beams += specular_beams.size();
+    stats.final_specular_radius = specular_beams.empty() ? stats.final_specular_radius : specular_radius;
+    stats.accel_references += accel->references() + specular_accel->references();
     stats.final_radius = R;
     stats.path_media = int(std::count(path_media.begin(), path_media.end(), char(1)));
     stats.final_time_half_width = T;
@@ -181,7 +198,7 @@ RenderResult render(const Scene& scene, const RenderSettings& settings, const Pr
     stats.final_surface_radius = photon_grid.radius();
     stats.final_surface_time_half_width = T_s;
     if (settings.snapshot_every > 0 && (it + 1) % settings.snapshot_every == 0) add_snapshot(state, it + 1, elapsed());
-    report(int(it + 1), R, T, beams.size(), r_s, photons.size());
+    report(int(it + 1), R, T, beams.size() + specular_beams.size(), r_s, photons.size());
     // No checkpoint after the last planned iteration: the result itself follows at once.
     const bool due =
         (settings.checkpoint_every_iterations > 0 && (it + 1) % settings.checkpoint_every_iterations == 0) ||

@@ -23,17 +23,30 @@ struct CameraFrame {
 
 CameraFrame make_camera_frame(const Camera& camera);
 
+// A set of photon beams with the structure built over them and the kernel radius it was built with.
+// A per-medium radius (`medium_radius`, indexed by medium id, none above `radius`) overrides it in the
+// gather; the structure is built with `radius`, so it returns a superset of the pairs.
+struct BeamLayer {
+  const std::vector<Beam>* beams = nullptr;
+  const BeamAccel* accel = nullptr;
+  double radius = 0.0;
+  const std::vector<double>* medium_radius = nullptr;
+  double radius_in(int medium) const { return medium_radius ? (*medium_radius)[medium] : radius; }
+};
+
 // Everything one iteration's camera pass needs, read-only.
 struct CameraPass {
   const CompiledScene* cs;
   const RenderSettings* st;
-  const std::vector<Beam>* beams;
-  const BeamAccel* accel;
+  BeamLayer beams;  // beams in media that keep them (§3), radius R_i
+  // Beams of delta lights that met a dielectric before their first scattering, in media on paths (§12,
+  // "Delta lights behind dielectrics"), with their own radius; gathered until the camera path first scatters.
+  BeamLayer specular_beams;
   const std::vector<SurfacePhoton>* photons;
   const SurfacePhotonGrid* photon_grid;
   const std::vector<char>* path_media;  // per medium: 1 where camera paths are path traced (§12)
   std::uint64_t iteration;
-  double radius, time_half_width, inv_paths;
+  double time_half_width, inv_paths;
   double surface_radius, surface_time_half_width;
   CameraFrame camera;
   double far_length;
@@ -42,6 +55,7 @@ struct CameraPass {
 // A tile's counts of queries and pairs, added to the render's stats when the tile is done.
 struct TileStats {
   std::uint64_t queries = 0, candidates = 0, pairs = 0, parallel = 0, false_positives = 0;
+  std::uint64_t specular_pairs = 0;
   std::uint64_t surface_queries = 0, surface_pairs = 0;
   std::uint64_t path_vertices = 0, path_connections = 0, path_clearance_queries = 0, path_clear_flights = 0;
 
@@ -50,6 +64,7 @@ struct TileStats {
     s.queries += queries;
     s.candidates += candidates;
     s.pair_evaluations += pairs;
+    s.specular_pairs += specular_pairs;
     s.parallel_rejected += parallel;
     s.false_positives += false_positives;
     s.surface_queries += surface_queries;

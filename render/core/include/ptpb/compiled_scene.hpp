@@ -38,6 +38,7 @@ struct LightSample {
   Vec3d power{};  // beta_0 divided by the light-selection probability, W
   int medium = kVacuum;
   bool timeless = false;  // environment light: no time origin, steady image only
+  bool delta = false;     // point light or sun: next-event estimation is the only way a camera path reaches it
 };
 
 class CompiledScene {
@@ -73,6 +74,10 @@ class CompiledScene {
   double sky_light_pdf() const;
   // True when some surface is diffuse with a non-zero albedo (surface photons have somewhere to land).
   bool has_diffuse_reflectors() const { return has_diffuse_reflectors_; }
+  // True when a delta light (point or sun) with power and a smooth dielectric surface share the scene:
+  // light paths can then reach a medium along a way next-event estimation cannot follow (DESIGN.md §12,
+  // "Delta lights behind dielectrics").
+  bool has_specular_delta_light() const { return has_specular_delta_light_; }
   double ray_epsilon() const { return ray_epsilon_; }
   Vec3d sphere_center() const { return sphere_center_; }
   double sphere_radius() const { return sphere_radius_; }
@@ -97,6 +102,7 @@ class CompiledScene {
   double sphere_radius_ = 0.0;
   double ray_epsilon_ = 1e-5;
   bool has_diffuse_reflectors_ = false;
+  bool has_specular_delta_light_ = false;
   std::vector<double> area_light_pick_;  // per shape: probability of picking it as a light (0: none)
   double sky_pick_ = 0.0;
 

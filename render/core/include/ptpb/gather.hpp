@@ -23,9 +23,11 @@ inline PairTest test_beam_pair(const ClosestApproach& ca, double t_max, double b
   return PairTest::Inside;
 }
 
-// Beam×beam estimate along the query segment [0, t_q] of one camera segment (§4, §5).
-void gather(const CameraPass& p, const PixelSplat& splat, const Vec3d& pos, const Vec3d& dir, double t_q, int medium,
-            const Vec3d& weight, double tau_c, int depth_c, std::vector<std::uint32_t>& cand, TileStats& ts);
+// Beam×beam estimate along the query segment [0, t_q] of one camera segment (§4, §5), over the beams
+// of `layer` with its radius. Returns the number of pairs it accepted.
+std::uint64_t gather(const CameraPass& p, const BeamLayer& layer, const PixelSplat& splat, const Vec3d& pos,
+                     const Vec3d& dir, double t_q, int medium, const Vec3d& weight, double tau_c, int depth_c,
+                     std::vector<std::uint32_t>& cand, TileStats& ts);
 
 // Surface photon estimate at a diffuse camera hit x (§7); `normal` faces the camera side, `weight`
 // is the camera throughput up to x and tau_c the camera OPL to x.

@@ -33,4 +33,11 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
 // below R / beam_radius_mfp or below the scene's bounding radius / dense_optical_radius.
 std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSettings& st, double radius);
 
+// Kernel radii of the specular-delta beams (DESIGN.md §12, "Delta lights behind dielectrics"), per
+// medium, in an iteration whose beam radius is `radius` on a schedule that starts at `initial_radius`:
+// min(R_0, beam_radius_mfp / max sigma_t) shrunk by the beams' own factor R_i / R_0, so that it starts
+// where beams are unbiased in that medium and vanishes on the beams' schedule. 0 for media not on paths.
+std::vector<double> specular_beam_radii(const CompiledScene& cs, const RenderSettings& st,
+                                        const std::vector<char>& path_media, double radius, double initial_radius);
+
 }  // namespace ptpb

@@ -18,7 +18,7 @@ struct Progress {
   double elapsed_s = 0.0;
   double radius = 0.0;  // R_i of the iteration in flight or just done
   double time_half_width = 0.0;
-  std::uint64_t beams = 0;
+  std::uint64_t beams = 0;      // beams stored in the iteration, specular-delta beams (§12) included
   double surface_radius = 0.0;  // r_i of the surface photons
   std::uint64_t surface_photons = 0;
 };
@@ -41,6 +41,10 @@ struct RenderStats {
   // used paths in the last iteration.
   std::uint64_t path_vertices = 0, path_connections = 0, path_clearance_queries = 0, path_clear_flights = 0;
   int path_media = 0;
+  // Delta lights behind dielectrics (§12): specular-delta beams stored, pairs accepted, and the largest
+  // of their per-medium radii in the last iteration that stored any.
+  std::uint64_t specular_beams = 0, specular_pairs = 0;
+  double final_specular_radius = 0;
   double final_surface_radius = 0, final_surface_time_half_width = 0;
   double steady_total = 0, early_total = 0, late_total = 0;  // image sums, for the window check
   Schedule schedule;                                         // the bandwidth schedule this run resolved and used (§6)
