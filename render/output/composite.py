@@ -126,7 +126,8 @@ def light_in_flight(
 ) -> dict[str, Path]:
     """Each frame's light over the dimmed steady image, as in femto-photography videos: the steady image at
     ``light_in_flight_dim`` of its brightness, the frame's light screened over it with the clip's exposure.
-    Writes light_in_flight.mp4, a 2 x 2 panel of four moments (the size of the still), still.png (the steady
+    Writes light_in_flight.mp4, a 2 x 2 panel of four moments (the size of the still; larger for small
+    renders), still.png (the steady
     image at full size, unlabelled) and the time-of-arrival map."""
     from render.output.figures import time_of_arrival_map
 
@@ -140,8 +141,12 @@ def light_in_flight(
     def composed(k: int) -> np.ndarray:
         return np.round(screened(k) * 255).astype(np.uint8)
 
-    def half(k: int) -> np.ndarray:  # a 2 x 2 box average: four moments make a panel of the still's size
+    def tile(k: int) -> np.ndarray:
+        """A 2 x 2 box average, so that four moments make a panel of the still's size; below 480 rows the
+        frame at full size, enlarged to at least 240 rows, so that the panel and its labels stay legible."""
         image = screened(k)
+        if image.shape[0] < 480:
+            return upscale(np.round(image * 255).astype(np.uint8), 240)
         height, width = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
         blocks = image[:height, :width].reshape(height // 2, 2, width // 2, 2, 3)
         return np.round(blocks.mean(axis=(1, 3)) * 255).astype(np.uint8)
@@ -153,7 +158,7 @@ def light_in_flight(
     paths = {"light_in_flight": write_mp4(out_dir / "light_in_flight.mp4", video, fps)}
     moments = np.linspace(0, len(frames) - 1, 4).round().astype(int)
     tiles = [
-        annotate(half(int(k)), [format_time(film.centre(int(k)) - film.start_opl, cfg.time_unit)]) for k in moments
+        annotate(tile(int(k)), [format_time(film.centre(int(k)) - film.start_opl, cfg.time_unit)]) for k in moments
     ]
     panel = np.concatenate([np.concatenate(tiles[:2], axis=1), np.concatenate(tiles[2:], axis=1)], axis=0)
     panel_path = out_dir / "light_in_flight_panel.png"
@@ -207,7 +212,9 @@ def side_by_side(
     b_frames = check_frames(b_frames, labels[1])
     if a_frames.shape != b_frames.shape:
         raise ValueError(f"cannot compare {labels[0]} {a_frames.shape} with {labels[1]} {b_frames.shape}")
-    scale = exposure_scale(b_frames, cfg.exposure_percentile)
+    # One exposure for both, from both: from the reference alone a black one (Mitsuba's delta sun behind a
+    # dielectric) would blow ours out to white.
+    scale = exposure_scale(np.concatenate([a_frames, b_frames]), cfg.exposure_percentile)
     colormap = matplotlib.colormaps["inferno"]
     panels = []
     for k in range(len(a_frames)):
@@ -231,7 +238,7 @@ def side_by_side(
         a_frames.sum(axis=0),
         b_frames.sum(axis=0),
         labels,
-        exposure_scale(b_frames.sum(axis=0), cfg.exposure_percentile),
+        exposure_scale(np.concatenate([a_frames.sum(axis=0), b_frames.sum(axis=0)]), cfg.exposure_percentile),
         still,
         cfg.tone_curve,
         title="Sum over all frames",

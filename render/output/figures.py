@@ -99,7 +99,10 @@ def side_by_side_still(
         ax.axis("off")
     diff = relative_difference(a, b)
     im = axes[2].imshow(diff, cmap="inferno", vmin=0, vmax=vmax, interpolation="nearest")
-    axes[2].set_title(f"relative difference (mean {np.mean(diff):.3f})")
+    if np.any(luminance(b) > 0):
+        axes[2].set_title(f"relative difference (mean {np.mean(diff):.3g})")
+    else:  # a black reference (Mitsuba's delta sun behind a dielectric): no ratio to quote
+        axes[2].set_title(f"relative difference ({labels[1]} is black)")
     axes[2].axis("off")
     fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.04, label="|a − b| / b")
     if title:

@@ -79,7 +79,12 @@ def test_light_in_flight_time_of_arrival_and_exr_frames(tmp_path):
     assert paths["time_of_arrival"].stat().st_size > 1000
     from PIL import Image
 
-    assert Image.open(paths["still"]).size == Image.open(paths["light_in_flight_panel"]).size == (30, 20)
+    assert Image.open(paths["still"]).size == (30, 20)
+    # Below 480 rows each moment is the frame at full size, enlarged by a whole factor to >= 240 rows (12 here).
+    assert Image.open(paths["light_in_flight_panel"]).size == (2 * 30 * 12, 2 * 20 * 12)
+    big = pulse_frames(t_count=4, height=480, width=640)
+    panel = light_in_flight(big, big.sum(axis=0), FrameAxis(3.0, 0.03, "bins", 4), cfg, tmp_path / "big")
+    assert Image.open(panel["light_in_flight_panel"]).size == Image.open(panel["still"]).size == (640, 480)
     written = write_exr_frames(
         tmp_path / "exr", frames, axis, {"penitentes:exposure": 2.5, "penitentes:config_hash": "abc"}
     )
