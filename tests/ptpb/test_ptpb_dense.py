@@ -295,6 +295,40 @@ def test_no_start_radius_biases_the_mean(sigma_t, mfps):
         assert abs(ratio - 1) < 0.02
 
 
+def mitsuba_half_space(sigma_t: float, albedo: float, spp: int, seed: int, rr_depth: int, units: float = 1.0):
+    """``half_space``'s slab under a zenith sun in Mitsuba's volpath, steady (``units`` per metre)."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("llvm_ad_rgb")
+    T = mi.ScalarTransform4f
+    scene = {
+        "type": "scene",
+        "integrator": {"type": "volpath", "max_depth": -1, "rr_depth": rr_depth},
+        "sensor": {
+            "type": "perspective",
+            "fov": HALF_SPACE_FOV,
+            "fov_axis": "x",
+            "near_clip": 1e-4 * units,
+            "to_world": T().look_at(origin=[0, 1e-3 * units, 5.0 * units], target=[0, 0, 0], up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": HALF_SPACE_RES, "height": HALF_SPACE_RES, "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+        "slab": {
+            "type": "cube",
+            "to_world": T().translate([0, 0, -0.75 * units]) @ T().scale([3 * units, 3 * units, 0.75 * units]),
+            "bsdf": {"type": "null"},
+            "interior": {
+                "type": "homogeneous",
+                "scale": sigma_t / units,
+                "sigma_t": {"type": "rgb", "value": [1.0] * 3},
+                "albedo": {"type": "rgb", "value": [albedo] * 3},
+                "phase": {"type": "isotropic"},
+            },
+        },
+        "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": {"type": "rgb", "value": [1] * 3}},
+    }
+    return np.asarray(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float64)[..., :3]
+
+
 @pytest.mark.mitsuba
 @pytest.mark.slow
 @pytest.mark.parametrize("sigma_t", [400.0, 2000.0])
@@ -303,82 +337,37 @@ def test_mitsuba_references_against_the_exact_half_space(sigma_t):
     comes out 1.2 % high at sigma_t = 400 and 4.4 % high at 2000 (its ray offset skips the top of the
     medium, where the upward radiance is lowest), in millimetres 0.3 % and 1.2 %. Ours is checked against
     the same value in the fast test above."""
-    mi = pytest.importorskip("mitsuba")
-    mi.set_variant("llvm_ad_rgb")
-    T = mi.ScalarTransform4f
     expected = half_space_expected(0.9995, 1.0)
-    ratios = {}
-    for units in (1.0, MI_UNITS):
-        scene = {
-            "type": "scene",
-            "integrator": {"type": "volpath", "max_depth": -1, "rr_depth": MI_RR},
-            "sensor": {
-                "type": "perspective",
-                "fov": HALF_SPACE_FOV,
-                "fov_axis": "x",
-                "near_clip": 1e-4 * units,
-                "to_world": T().look_at(origin=[0, 1e-3 * units, 5.0 * units], target=[0, 0, 0], up=[0, 1, 0]),
-                "film": {
-                    "type": "hdrfilm",
-                    "width": HALF_SPACE_RES,
-                    "height": HALF_SPACE_RES,
-                    "rfilter": {"type": "box"},
-                },
-                "sampler": {"type": "independent", "sample_count": 512},
-            },
-            "slab": {
-                "type": "cube",
-                "to_world": T().translate([0, 0, -0.75 * units]) @ T().scale([3 * units, 3 * units, 0.75 * units]),
-                "bsdf": {"type": "null"},
-                "interior": {
-                    "type": "homogeneous",
-                    "scale": sigma_t / units,
-                    "sigma_t": {"type": "rgb", "value": [1.0] * 3},
-                    "albedo": {"type": "rgb", "value": [0.9995] * 3},
-                    "phase": {"type": "isotropic"},
-                },
-            },
-            "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": {"type": "rgb", "value": [1] * 3}},
-        }
-        loaded = mi.load_dict(scene)
-        images = [np.asarray(mi.render(loaded, spp=512, seed=s), dtype=np.float64)[..., :3] for s in range(3)]
-        ratios[units] = float(np.mean(images)) / expected
+    ratios = {
+        units: float(np.mean([mitsuba_half_space(sigma_t, 0.9995, 512, s, MI_RR, units) for s in range(3)])) / expected
+        for units in (1.0, MI_UNITS)
+    }
     print(f"sigma_t {sigma_t}: volpath / Chandrasekhar in metres {ratios[1.0]:.4f}, millimetres {ratios[MI_UNITS]:.4f}")
     assert ratios[MI_UNITS] - 1 < 0.5 * (ratios[1.0] - 1)  # millimetres at least halve the bias
     assert abs(ratios[MI_UNITS] - 1) < 0.02
 
 
-def diffusion_slab(res: int = 16, frames: int = 160, width: float = 0.05) -> dict:
-    """A 6 m x 6 m x 1.5 m index-matched slab (sigma_s' = 60, sigma_a = 0.6 per m: snow in its isotropic
-    reduced form, a little more absorbing so that the tail fits a test) under a plane-wave pulse from the
-    zenith, seen from 5 m above through an 8 degree pinhole. The sun's wavefront passes the top face at
-    tau = 0, so light that entered and left at once reaches the camera at 5 m of OPL."""
-    v, f = box_mesh((-3, -3, -1.5), (3, 3, 0.0))
-    return {
-        "media": [{"sigma_s": (60.0,) * 3, "sigma_a": (0.6,) * 3, "g": 0.0, "ior": 1.0}],
-        "shapes": [{"vertices": v, "faces": f, "kind": "null", "interior": 0, "exterior": -1}],
-        "directional_lights": [{"to_sun": (0, 0, 1), "irradiance": (1, 1, 1), "reference_point": (0, 0, 0)}],
-        "camera": {
-            "origin": (0, 1e-3, 5.0),
-            "target": (0, 0, 0),
-            "up": (0, 1, 0),
-            "fov": 8,
-            "width": res,
-            "height": res,
-        },
-        "film": {"frame_mode": "bins", "temporal_bins": frames, "start_opl": 5.0, "bin_width_opl": width},
-    }
+def diffusion_slab(frames: int = 160, width: float = 0.05) -> dict:
+    """``half_space``'s slab with sigma_s' = 60 and sigma_a = 0.6 per m (snow in its isotropic reduced form, a
+    little more absorbing so that the tail fits a test) under a plane-wave pulse from the zenith. The sun's
+    wavefront passes the top face at tau = 0, so light that entered and left at once reaches the camera at
+    5 m of OPL."""
+    scene = half_space(60.6, 60.0 / 60.6, 1.0)
+    scene["film"] = {"frame_mode": "bins", "temporal_bins": frames, "start_opl": 5.0, "bin_width_opl": width}
+    return scene
 
 
 @pytest.mark.mitsuba
 @pytest.mark.slow
 def test_time_resolved_diffusion_tail_of_a_thick_slab():
-    """R(s) ~ s^(-3/2) exp(-sigma_a s) (DESIGN.md §12): fit the power and sigma_a over s = 0.3-6 m of
-    excess OPL, and compare the total with volpath's steady image."""
+    """R(s) ~ s^(-3/2) exp(-sigma_a s) (DESIGN.md §12): fit the power and sigma_a over s = 1-6 m of
+    excess OPL, and compare the total with volpath's steady image. The tail starts late: fitted over
+    0.3-6 m, the extrapolated-boundary dipole itself gives -1.43 and sigma_a +2.8 % (its image source sits
+    z0 + 4D = 3.9 cm deep), over 1-6 m -1.46 and +1.2 %."""
     r = render(diffusion_slab(), settings(iterations=1, time_budget_s=30))
     energy = r.frames.mean(axis=(1, 2, 3))
     s = (np.arange(energy.size) + 0.5) * 0.05
-    fit = (s > 0.3) & (s < 6.0)
+    fit = (s > 1.0) & (s < 6.0)
     design = np.stack([np.ones(fit.sum()), np.log(s[fit]), s[fit]], axis=1)
     (_, power, slope), *_ = np.linalg.lstsq(design, np.log(energy[fit]), rcond=None)
     print(
@@ -387,45 +376,7 @@ def test_time_resolved_diffusion_tail_of_a_thick_slab():
     assert abs(power + 1.5) < 0.1
     assert abs(-slope / 0.6 - 1) < 0.05
 
-    mi = pytest.importorskip("mitsuba")
-    mi.set_variant("llvm_ad_rgb")
-    T = mi.ScalarTransform4f
-    ref = mi.render(
-        mi.load_dict(
-            {
-                "type": "scene",
-                "integrator": {"type": "volpath", "max_depth": -1, "rr_depth": 200},
-                "sensor": {
-                    "type": "perspective",
-                    "fov": 8,
-                    "fov_axis": "x",
-                    "near_clip": 1e-4,
-                    "to_world": T().look_at(origin=[0, 1e-3, 5.0], target=[0, 0, 0], up=[0, 1, 0]),
-                    "film": {"type": "hdrfilm", "width": 16, "height": 16, "rfilter": {"type": "box"}},
-                    "sampler": {"type": "independent", "sample_count": 4096, "seed": 5},
-                },
-                "slab": {
-                    "type": "cube",
-                    "to_world": T().translate([0, 0, -0.75]) @ T().scale([3, 3, 0.75]),
-                    "bsdf": {"type": "null"},
-                    "interior": {
-                        "type": "homogeneous",
-                        "scale": 60.6,
-                        "sigma_t": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
-                        "albedo": {"type": "rgb", "value": [60.0 / 60.6] * 3},
-                        "phase": {"type": "isotropic"},
-                    },
-                },
-                "sun": {
-                    "type": "directional",
-                    "direction": [0, 0, -1],
-                    "irradiance": {"type": "rgb", "value": [1, 1, 1]},
-                },
-            }
-        ),
-        spp=4096,
-    )
-    total = np.asarray(ref, dtype=np.float64)[..., :3].mean()
+    total = mitsuba_half_space(60.6, 60.0 / 60.6, 4096, 5, rr_depth=200).mean()
     ours = (r.frames.sum(axis=0) + r.early + r.late).mean()
     print(f"ours {ours:.5f}, volpath {total:.5f}, ratio {ours / total:.4f}")
     assert abs(ours / total - 1) < 0.03
