@@ -57,6 +57,16 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
   Vec3d pos = cam.origin, weight{1, 1, 1};
   int medium = scene.camera.medium, depth_c = 0;
   double tau_c = 0.0;
+  // A pair of a beam and this camera segment makes a path of depth >= depth_c + 2 (§3).
+  auto gathers_allowed = [&](int depth) { return st.max_depth < 0 || depth + 2 <= st.max_depth; };
+  // The query segment along a camera ray in a medium (§4): long queries run to the face or to the
+  // transmittance cutoff, short ones to the sampled free flight s; unbounded ones to far_length.
+  auto query_length = [&](const Vec3d& sigma_t, double dist, double s) {
+    const double t_q = st.query_beam_kind == BeamKind::Long
+                           ? std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff))
+                           : std::min(s, dist);
+    return std::isfinite(t_q) ? t_q : p.far_length;
+  };
   for (int guard = 0; guard < 100000; ++guard) {
     const SurfaceHit hit = cs.intersect(pos, dir);
     const double dist = hit.valid ? hit.t : std::numeric_limits<double>::infinity();
@@ -70,11 +80,8 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
       // by the path tracer's next-event estimation: it is estimated here, by the specular-delta beams
       // along the segment, for every first camera vertex the segment holds, and by nothing else
       // (§12, "Delta lights behind dielectrics").
-      if (!p.specular_beams.beams->empty() && (st.max_depth < 0 || depth_c + 2 <= st.max_depth)) {
-        double t_q = st.query_beam_kind == BeamKind::Long
-                         ? std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff))
-                         : std::min(s, dist);
-        if (!std::isfinite(t_q)) t_q = p.far_length;
+      if (!p.specular_beams.beams->empty() && gathers_allowed(depth_c)) {
+        const double t_q = query_length(sigma_t, dist, s);
         ts.specular_pairs +=
             gather(p, p.specular_beams, splat, pos, dir, t_q, medium, weight, tau_c, depth_c, cand, ts);
       }
@@ -93,17 +100,12 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
       weight = weight * transmittance(sigma_t, dist) / survival_mixture(sigma_t, dist);
     } else if (cs.scattering(medium)) {
       const Vec3d sigma_t = scene.media[medium].sigma_t();
-      double t_q;
-      bool stop_inside = false;
-      if (st.query_beam_kind == BeamKind::Long) {
-        t_q = std::min(dist, cutoff_distance(sigma_t, st.transmittance_cutoff));
-      } else {
-        const double ts_sample = sample_free_flight(sigma_t, rng);
-        stop_inside = ts_sample < dist;
-        t_q = std::min(ts_sample, dist);
-      }
-      if (!std::isfinite(t_q)) t_q = p.far_length;
-      if (st.max_depth < 0 || depth_c + 2 <= st.max_depth)
+      // Short query beams end at a sampled free flight; long ones ignore it (and draw none).
+      const double s = st.query_beam_kind == BeamKind::Short ? sample_free_flight(sigma_t, rng)
+                                                             : std::numeric_limits<double>::infinity();
+      const bool stop_inside = s < dist;
+      const double t_q = query_length(sigma_t, dist, s);
+      if (gathers_allowed(depth_c))
         ts.pairs += gather(p, p.beams, splat, pos, dir, t_q, medium, weight, tau_c, depth_c, cand, ts);
       if (stop_inside || !hit.valid) return;
       weight = weight * transmittance(sigma_t, dist);

@@ -84,10 +84,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
         const double thinnest = min_component(sigma_t);
         const double diameter = 2.0 * cs.sphere_radius();
         const double reach = thinnest > 0 ? std::min(kClearanceReach / thinnest, diameter) : diameter;
-        // Less a float ulp or so of the position, so that Embree could not have seen a face inside it.
-        const Vec3d& x = v.position;
-        const double margin = 1e-6 * (1.0 + std::max({std::fabs(x.x), std::fabs(x.y), std::fabs(x.z)}));
-        clearance = std::max(0.0, cs.clearance(v.position, reach) - margin);
+        clearance = cs.clearance(v.position, reach);
         ++ts.path_clearance_queries;
       }
       if (clearance > 0 && cs.lights_beyond_surfaces())

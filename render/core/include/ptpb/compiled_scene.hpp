@@ -1,6 +1,8 @@
 // A validated scene ready for tracing: the Embree triangle scene, per-mesh surface data, light
 // sampling tables and the bounding sphere that fixes the sun's time origin.
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include <memory>
 #include <vector>
 
@@ -52,8 +54,12 @@ class CompiledScene {
   SurfaceHit intersect(const Vec3d& origin, const Vec3d& direction, bool from_medium = false) const;
   double ior(int medium) const { return medium == kVacuum ? scene_.ambient_ior : scene_.media[medium].ior; }
   bool scattering(int medium) const { return medium != kVacuum && has_scattering_[medium]; }
-  // Distance from p to the nearest surface, or `reach` when none is closer (DESIGN.md §12, clearance).
-  double clearance(const Vec3d& p, double reach) const { return rays_.closest_distance(p, reach); }
+  // Distance from p to the nearest surface, or `reach` when none is closer (DESIGN.md §12, clearance),
+  // less a float ulp or so of p, so that Embree's single-precision rays could not see a face inside it.
+  double clearance(const Vec3d& p, double reach) const {
+    const double margin = 1e-6 * (1.0 + std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)}));
+    return std::max(0.0, rays_.closest_distance(p, reach) - margin);
+  }
   // Whether every light lies on or beyond a surface, so that a shadow ray from a medium vertex crosses
   // at least its clearance of that medium (no point or spot light sits inside a medium).
   bool lights_beyond_surfaces() const { return scene_.point_lights.empty(); }
