@@ -82,7 +82,7 @@ def reference(scene_dir: Path, cfg) -> Reference:
     (its ``rr_depth``, when set, replaces the scene's, as in the reference stage)."""
     import mitsuba
 
-    from render.mitsuba.export import use_variant
+    from render.mitsuba.export import disk_sun_opl_shift, use_variant
     from render.mitsuba.passes import render_transient
     from render.mitsuba.stage import reference_scene
 
@@ -90,9 +90,11 @@ def reference(scene_dir: Path, cfg) -> Reference:
     import mitransient
 
     spp = cfg.transient_spp or cfg.spp
+    scene = reference_scene(scene_dir, cfg)
     key_text = json.dumps(
         {
             "scene": _scene_digest(scene_dir),
+            "window_shift_opl": disk_sun_opl_shift(scene, scene_dir),  # the time axis the frames are on
             "spp": spp,
             "rr_depth": cfg.rr_depth,
             "seeds": REFERENCE_SEEDS,
@@ -107,7 +109,6 @@ def reference(scene_dir: Path, cfg) -> Reference:
                 (z["frames_a"], z["frames_b"]), (z["steady_a"], z["steady_b"]), int(z["spp"]), float(z["seconds"])
             )
     print(f"rendering the reference: mitransient at {spp} spp, cached in {path} (once; minutes) ...", flush=True)
-    scene = reference_scene(scene_dir, cfg)
     halves = []
     t0 = time.perf_counter()
     for seed in REFERENCE_SEEDS:

@@ -323,10 +323,46 @@ def test_disk_sun_frames_on_the_ptpb_time_axis(tmp_path):
         f"fraction {profile[bins[0]] / profile.sum():.5f}, "
         f"window shift {timing['start_opl_shift_m']:.3f} m (D - R_s = {999 * radius:.3f})"
     )
-    assert timing["start_opl_shift_m"] == pytest.approx(999 * radius, rel=1e-9)
+    alpha = math.radians(0.53) / 2  # the schema's default angular diameter
+    assert timing["start_opl_shift_m"] == pytest.approx(999 * radius + 1000 * radius * math.tan(alpha) ** 2 / 4, rel=1e-9)
     assert profile[bins[0]] / profile.sum() > 0.999
     np.testing.assert_allclose(frames.sum(0), steady, rtol=1e-4)
     np.testing.assert_allclose(steady / (1000.0 * 0.5 / math.pi), 1.0, atol=0.01)
+
+
+def test_wide_disk_sun_arrives_on_average_with_the_plane_wave(tmp_path):
+    """A disk at finite distance D delays its light by |q⊥|² / 2D beyond the plane wave, ρ²/4D on average
+    (disk_sun_opl_shift). With an 8° disk at 100 R that is 0.17 m, many 5 mm bins: the frames' mean arrival
+    must still be the plane wave's, to within the curvature term and a bin."""
+    cam = Camera(origin=(0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=3.0, width=16, height=12)
+    mesh = shapes.box_mesh((-1, -1, -0.2), (1, 1, 0))
+    centre, radius = bounding_sphere_of_points(mesh[0])
+    s = np.array([0.0, 0.0, 1.0])
+    p0 = centre + radius * s
+    # Plane-wave τ of the pixel centres: (P0 - x)·s + |x - camera|, nearly one value under a 3° view.
+    px, py = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+    d = camera_ray_direction(cam, px.ravel(), py.ravel())
+    t = -cam.origin[2] / d[:, 2]
+    x = np.asarray(cam.origin) + t[:, None] * d
+    predicted = float(np.mean((p0 - x) @ s + t))
+    film = Film(mode="transient", temporal_bins=160, start_opl=round(predicted - 0.4, 2), bin_width_opl=0.005)
+    light = sun(s, (1000.0, 1000.0, 1000.0), "disk", disk_distance_radii=100.0, tau_origin_point=p0.tolist())
+    light["angular_diameter_deg"] = 8.0
+    scene = make_scene(
+        tmp_path,
+        [("plane", mesh, {"kind": "diffuse", "albedo": (0.5, 0.5, 0.5)})],
+        camera=cam,
+        film=film,
+        lights=[light],
+    )
+    frames, _, timing = render_transient(scene, tmp_path, spp=64, spp_per_pass=64, quiet=True)
+    profile = frames.sum((1, 2, 3), dtype=np.float64)
+    centres = film.start_opl + film.bin_width_opl * (np.arange(film.temporal_bins) + 0.5)
+    mean_tau = float(profile @ centres / profile.sum())
+    excess = 100 * radius * math.tan(math.radians(4.0)) ** 2 / 4
+    print(f"wide disk sun: mean arrival {mean_tau:.4f} m, plane wave {predicted:.4f} m, disk's mean excess {excess:.3f} m")
+    assert profile[0] == 0 and profile[-1] == 0, "test set-up: the window must hold the whole arrival"
+    assert abs(mean_tau - predicted) < 0.01
 
 
 # ---------------------------------------------------------------- the dielectric refusal
