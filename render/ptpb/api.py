@@ -10,6 +10,7 @@
      "point_lights": [{"position", "intensity" (W/sr), "medium"}],
      "directional_lights": [{"to_sun", "irradiance" (W/m^2), "reference_point" or None}],
      "environment_radiance": (3,),  # constant sky, steady image only
+     "environment_up": (3,),  # optional: next-event estimation samples the sky's hemisphere around it
      "ambient_ior": 1.0,
      "camera": {"origin", "target", "up", "fov" (deg), "fov_axis", "width", "height", "medium"},
      "film": {"frame_mode": "steady"|"bins"|"gate", "temporal_bins", "start_opl" (m), "bin_width_opl" (m)}}

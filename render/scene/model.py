@@ -322,6 +322,8 @@ def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str], list[str]]:
             )
         elif light["type"] == "sky":
             core["environment_radiance"] = list(light["radiance"])
+            # z is up in the neutral scene: next-event estimation samples the sky above the horizon.
+            core["environment_up"] = [0.0, 0.0, 1.0]
         elif light["type"] == "point":
             core["point_lights"].append(
                 {

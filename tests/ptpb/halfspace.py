@@ -49,6 +49,13 @@ def chandrasekhar_h(albedo: float, nodes: int = 400):
     return H
 
 
+def sky_reflected_radiance(albedo: float, mu):
+    """Radiance leaving the surface at ``mu`` under a uniform sky of unit radiance: by reciprocity the
+    albedo for incidence at μ, 1 − H(μ) √(1 − ω) (Chandrasekhar ch. IV; equal to 2π ∫ L(μ; μ0) dμ0 with
+    L from ``reflected_radiance``, to 1e-13)."""
+    return 1.0 - chandrasekhar_h(albedo)(np.asarray(mu, dtype=np.float64)) * math.sqrt(1 - albedo)
+
+
 def reflected_radiance(albedo: float, mu, mu0: float, irradiance: float = 1.0):
     """L(μ; μ0) above, for an array of view cosines ``mu``."""
     H = chandrasekhar_h(albedo)

@@ -220,6 +220,7 @@ Scene parse_scene(const py::dict& d) {
     sc.directional_lights.push_back(dl);
   }
   sc.environment_radiance = vec3(d, "environment_radiance", {0, 0, 0}, "scene");
+  sc.environment_up = vec3(d, "environment_up", {0, 0, 0}, "scene");
   sc.ambient_ior = get<double>(d, "ambient_ior", 1.0, "scene");
   const py::dict cam = require_key<py::dict>(d, "camera", "scene");
   sc.camera.origin = vec3(cam, "origin", {0, 0, 0}, "camera");

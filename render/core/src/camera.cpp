@@ -97,7 +97,8 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
         return;
       }
       if (!hit.valid) return;
-      weight = weight * transmittance(sigma_t, dist) / survival_mixture(sigma_t, dist);
+      const Vec3d tr = transmittance(sigma_t, dist);
+      weight = weight * tr / survival_mixture(tr);
     } else if (cs.scattering(medium)) {
       const Vec3d sigma_t = scene.media[medium].sigma_t();
       // Short query beams end at a sampled free flight; long ones ignore it (and draw none).

@@ -115,9 +115,13 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
     lights_.push_back({2, i, kPi * sphere_radius_ * sphere_radius_ * mean(l.irradiance)});
   }
   require(finite_nonneg(scene.environment_radiance), "environment_radiance must be finite and >= 0");
+  require(all_finite(scene.environment_up), "environment_up must be finite (zero: sample the whole sky)");
+  if (length(scene.environment_up) > 0) sky_up_ = normalize(scene.environment_up);
   if (max_component(scene.environment_radiance) > 0) {
-    // Constant sky: flux through the bounding disk from every direction, L * pi R^2 * 4 pi.
-    lights_.push_back({3, 0, 4.0 * kPi * kPi * sphere_radius_ * sphere_radius_ * mean(scene.environment_radiance)});
+    // Constant sky: flux through the bounding disk from every direction, L * pi R^2 * 4 pi; from the
+    // sampled hemisphere only (L * pi R^2 * 2 pi) when it has an up direction (DESIGN.md §12).
+    const double solid_angle = length(sky_up_) > 0 ? 2.0 * kPi : 4.0 * kPi;
+    lights_.push_back({3, 0, solid_angle * kPi * sphere_radius_ * sphere_radius_ * mean(scene.environment_radiance)});
   }
   for (const LightEntry& e : lights_) {
     total_power_ += e.power;

@@ -9,9 +9,17 @@
 #include "ptpb/sampling.hpp"
 
 namespace ptpb {
+namespace {
+
+// A shadow ray whose transmittance through the media it has crossed so far has fallen below this goes on
+// to its next face (and the test for occluders beyond) with probability max(tr) / kShadowRoulette,
+// divided by it (DESIGN.md §12, "Shadow rays that leave dense media").
+constexpr double kShadowRoulette = 0.05;
+
+}  // namespace
 
 Vec3d CompiledScene::shadow_transmittance(Vec3d x, const Vec3d& dir, double distance, int medium, bool from_medium,
-                                          double& opl, Vec3d& end) const {
+                                          KeyedRng& rng, double& opl, Vec3d& end) const {
   Vec3d tr{1, 1, 1};
   const bool bounded = std::isfinite(distance);
   // The light's own surface lies at `distance`: stop a little short of it.
@@ -36,7 +44,13 @@ Vec3d CompiledScene::shadow_transmittance(Vec3d x, const Vec3d& dir, double dist
     x = hit.position;
     remaining -= hit.t;
     medium = hit.medium_after;
-    if (!(max_component(tr) > 0)) return tr;
+    const double largest = max_component(tr);
+    if (!(largest > 0)) return tr;
+    if (largest < kShadowRoulette) {
+      const double keep = largest / kShadowRoulette;
+      if (!(rng.next_double() < keep)) return {0, 0, 0};
+      tr = tr / keep;
+    }
   }
   end = x;
   return tr;
@@ -47,7 +61,10 @@ double CompiledScene::area_light_pdf(std::uint32_t shape, double distance, doubl
   return area_light_pick_[shape] * distance * distance / (cos_light * shape_area_[shape]);
 }
 
-double CompiledScene::sky_light_pdf() const { return sky_pick_ * kInvFourPi; }
+double CompiledScene::sky_light_pdf(const Vec3d& direction) const {
+  if (length(sky_up_) == 0) return sky_pick_ * kInvFourPi;
+  return dot(direction, sky_up_) > 0 ? sky_pick_ * kInvTwoPi : 0.0;
+}
 
 bool CompiledScene::connect_light(KeyedRng& rng, const Vec3d& x, int medium, bool from_medium,
                                   LightConnection& out) const {
@@ -68,7 +85,7 @@ bool CompiledScene::connect_light(KeyedRng& rng, const Vec3d& x, int medium, boo
     const double d = length(w);
     if (!(d > 0)) return false;
     out.direction = w / d;
-    const Vec3d tr = shadow_transmittance(x, out.direction, d, medium, from_medium, opl, end);
+    const Vec3d tr = shadow_transmittance(x, out.direction, d, medium, from_medium, rng, opl, end);
     out.value = l.intensity * tr / (d * d * pick);
     out.tau = opl;
   } else if (e.kind == 1) {  // area light: a uniform point on its surface
@@ -80,7 +97,7 @@ bool CompiledScene::connect_light(KeyedRng& rng, const Vec3d& x, int medium, boo
     out.direction = w / d;
     const double cos_light = -dot(normal, out.direction);  // emission is one-sided, along the normal
     if (!(cos_light > 0)) return false;
-    const Vec3d tr = shadow_transmittance(x, out.direction, d, medium, from_medium, opl, end);
+    const Vec3d tr = shadow_transmittance(x, out.direction, d, medium, from_medium, rng, opl, end);
     out.pdf = area_light_pdf(static_cast<std::uint32_t>(e.index), d, cos_light);
     out.value = scene_.shapes[e.index].radiance * tr / out.pdf;
     out.tau = opl;
@@ -88,17 +105,19 @@ bool CompiledScene::connect_light(KeyedRng& rng, const Vec3d& x, int medium, boo
     const DirectionalLight& l = scene_.directional_lights[e.index];
     const Vec3d s = normalize(l.to_sun);
     out.direction = s;
-    const Vec3d tr = shadow_transmittance(x, s, std::numeric_limits<double>::infinity(), medium, from_medium, opl, end);
+    const Vec3d tr =
+        shadow_transmittance(x, s, std::numeric_limits<double>::infinity(), medium, from_medium, rng, opl, end);
     out.value = l.irradiance * tr / pick;
     // The wavefront leaves the plane Pi_0 at tau = 0 and reaches the shadow ray's last point `end`
     // through the surroundings (DESIGN.md §1), then x through the path just traced.
     const double plane_offset = l.has_reference_point ? dot(l.reference_point - sphere_center_, s) : sphere_radius_;
     out.tau = scene_.ambient_ior * (plane_offset - dot(end - sphere_center_, s)) + opl;
   } else {  // constant sky: a uniform direction
-    out.direction = sample_uniform_sphere(u1, u2);
-    const Vec3d tr =
-        shadow_transmittance(x, out.direction, std::numeric_limits<double>::infinity(), medium, from_medium, opl, end);
-    out.pdf = sky_light_pdf();
+    // Uniform over the sky's upper hemisphere (the ground below a snowfield sends none of it), or the sphere.
+    out.direction = length(sky_up_) > 0 ? from_frame(sky_up_, 1.0 - u1, 2.0 * kPi * u2) : sample_uniform_sphere(u1, u2);
+    const Vec3d tr = shadow_transmittance(x, out.direction, std::numeric_limits<double>::infinity(), medium,
+                                          from_medium, rng, opl, end);
+    out.pdf = sky_light_pdf(out.direction);
     out.value = scene_.environment_radiance * tr / out.pdf;
     out.tau = 0.0;
     out.timeless = true;

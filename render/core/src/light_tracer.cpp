@@ -66,11 +66,13 @@ void trace_light_path(const CompiledScene& cs, const RenderSettings& st, std::ui
         (on_paths ? out.specular_beams : out.beams).push_back(b);
       }
       if (scattered) {
-        beta = beta * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
+        const Vec3d tr = transmittance(sigma_t, s);
+        beta = beta * (m.sigma_s * tr) / pdf_mixture(sigma_t, tr);
         travel = s;
       } else {
         if (!hit.valid) return;
-        beta = beta * transmittance(sigma_t, dist) / survival_mixture(sigma_t, dist);
+        const Vec3d tr = transmittance(sigma_t, dist);
+        beta = beta * tr / survival_mixture(tr);
       }
     } else if (cs.attenuating(medium)) {
       if (!hit.valid) return;

@@ -19,9 +19,11 @@ double power_heuristic(double used, double other) {
 }
 
 // Clearance (DESIGN.md §12): a vertex that knows no surface lies within c of it takes a free flight
-// shorter than c without a ray, and keeps c - s; it asks the scene again once c falls below
-// kClearanceRequery mean free paths, searching kClearanceReach of the thinnest channel's mean free
-// paths (at most the scene's diameter).
+// shorter than c without a ray. The ball the scene was asked about stays with the path: a vertex at p
+// inside the ball (q, c_q) is at least c_q - |p - q| from every surface, which a random walk uses up
+// as its displacement (about sqrt(n) flights), not its path length (n flights). It asks the scene again
+// once that falls below kClearanceRequery mean free paths, searching kClearanceReach of the thinnest
+// channel's mean free paths (at most the scene's diameter).
 constexpr double kClearanceRequery = 1.0;
 constexpr double kClearanceReach = 32.0;
 // Next-event estimation from a vertex whose shadow ray must cross c of its medium (transmittance at most
@@ -79,12 +81,14 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
     double clearance = 0.0, nee_keep = 1.0;
     if (!v.surface) {
       const Vec3d sigma_t = scene.media[v.medium].sigma_t();
-      clearance = v.clearance;
+      clearance = v.clear_radius > 0 ? v.clear_radius - length(v.position - v.clear_centre) : 0.0;
       if (clearance < kClearanceRequery / max_component(sigma_t)) {
         const double thinnest = min_component(sigma_t);
         const double diameter = 2.0 * cs.sphere_radius();
         const double reach = thinnest > 0 ? std::min(kClearanceReach / thinnest, diameter) : diameter;
         clearance = cs.clearance(v.position, reach);
+        v.clear_centre = v.position;
+        v.clear_radius = clearance;
         ++ts.path_clearance_queries;
       }
       if (clearance > 0 && cs.lights_beyond_surfaces())
@@ -149,7 +153,10 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
       if (scattering) {
         const Medium& m = scene.media[medium];
         if (clear || s < dist) {
-          weight = weight * (m.sigma_s * transmittance(sigma_t, s)) / pdf_mixture(sigma_t, s);
+          const Vec3d tr = transmittance(sigma_t, s);
+          weight = weight * (m.sigma_s * tr) / pdf_mixture(sigma_t, tr);
+          const Vec3d clear_centre = v.clear_centre;
+          const double clear_radius = clear ? v.clear_radius : 0.0;
           v = PathVertex{};
           v.position = pos + dir * s;
           v.incoming = dir;
@@ -157,19 +164,21 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
           v.weight = weight;
           v.tau = tau + m.ior * s;
           v.interactions = interactions + 1;
-          v.clearance = clear ? clearance - s : 0.0;
+          v.clear_centre = clear_centre;
+          v.clear_radius = clear_radius;
           ts.path_clear_flights += clear ? 1 : 0;
           next = true;
           break;
         }
         if (!hit.valid) return;
-        weight = weight * transmittance(sigma_t, dist) / survival_mixture(sigma_t, dist);
+        const Vec3d tr = transmittance(sigma_t, dist);
+        weight = weight * tr / survival_mixture(tr);
       } else if (cs.attenuating(medium) && hit.valid) {
         weight = weight * transmittance(scene.media[medium].sigma_t(), dist);
       }
       if (!hit.valid) {
         if (sky && within_depth(interactions)) {
-          const double mis = null_chain ? power_heuristic(pdf_dir, cs.sky_light_pdf()) : 1.0;
+          const double mis = null_chain ? power_heuristic(pdf_dir, cs.sky_light_pdf(dir)) : 1.0;
           splat.add(0.0, weight * scene.environment_radiance * mis, true, T);
         }
         return;

@@ -77,7 +77,7 @@ class CompiledScene {
   // Solid-angle pdf with which connect_light picks a direction that reaches the emitter shape
   // `shape` at distance `distance` with cosine `cos_light` on the emitter, or the sky (for MIS).
   double area_light_pdf(std::uint32_t shape, double distance, double cos_light) const;
-  double sky_light_pdf() const;
+  double sky_light_pdf(const Vec3d& direction) const;
   // True when some surface is diffuse with a non-zero albedo (surface photons have somewhere to land).
   bool has_diffuse_reflectors() const { return has_diffuse_reflectors_; }
   // True when a delta light (point or sun) with power and a smooth dielectric surface share the scene:
@@ -111,13 +111,15 @@ class CompiledScene {
   bool has_specular_delta_light_ = false;
   std::vector<double> area_light_pick_;  // per shape: probability of picking it as a light (0: none)
   double sky_pick_ = 0.0;
+  Vec3d sky_up_{};  // next-event estimation samples the sky's hemisphere around it (zero: whole sphere)
 
   void sample_area_point(std::size_t shape, KeyedRng& rng, Vec3d& point, Vec3d& normal) const;
   // Transmittance from x along dir over `distance` (infinite: to the scene's end) through
   // index-matched boundaries; 0 when anything else is in the way. Adds the OPL to `opl` and leaves
-  // the end point in `end`.
-  Vec3d shadow_transmittance(Vec3d x, const Vec3d& dir, double distance, int medium, bool from_medium, double& opl,
-                             Vec3d& end) const;
+  // the end point in `end`. Past a face, a transmittance already below kShadowRoulette is rouletted
+  // (unbiased) with `rng` before the ray goes on.
+  Vec3d shadow_transmittance(Vec3d x, const Vec3d& dir, double distance, int medium, bool from_medium, KeyedRng& rng,
+                             double& opl, Vec3d& end) const;
 };
 
 }  // namespace ptpb

@@ -27,6 +27,11 @@ inline double pdf_mixture(const Vec3d& sigma_t, double s) {
 inline Vec3d transmittance(const Vec3d& sigma_t, double s) {
   return {std::exp(-sigma_t.x * s), std::exp(-sigma_t.y * s), std::exp(-sigma_t.z * s)};
 }
+// The same two from a transmittance already computed for that distance (no further exponentials).
+inline double survival_mixture(const Vec3d& tr) { return (tr.x + tr.y + tr.z) / 3.0; }
+inline double pdf_mixture(const Vec3d& sigma_t, const Vec3d& tr) {
+  return (sigma_t.x * tr.x + sigma_t.y * tr.y + sigma_t.z * tr.z) / 3.0;
+}
 // A free-flight distance drawn from the channel mixture (§3): a channel picked uniformly, then its
 // exponential; infinite for a channel without extinction (whose second draw is then not made).
 inline double sample_free_flight(const Vec3d& sigma_t, KeyedRng& rng) {

@@ -20,7 +20,10 @@ struct PathVertex {
   Vec3d weight{};            // camera throughput, the vertex's own sampling weight included
   double tau = 0.0;          // camera OPL from the pinhole to the vertex
   int interactions = 0;      // non-null interactions on the camera side, this vertex included
-  double clearance = 0.0;    // medium vertices: no surface lies closer than this (0: not known), §12
+  // Medium vertices: no surface lies within clear_radius of clear_centre (0: not known), a ball that holds
+  // the vertex; its clearance is clear_radius - |position - clear_centre| (§12).
+  Vec3d clear_centre{};
+  double clear_radius = 0.0;
 };
 
 // Traces the rest of the camera path from `start` with the pixel's stream `rng` and splats every

@@ -9,6 +9,7 @@ namespace ptpb {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kInvFourPi = 1.0 / (4.0 * kPi);
+constexpr double kInvTwoPi = 1.0 / (2.0 * kPi);
 
 // Orthonormal basis (s, t) completing the unit vector n (Duff et al. 2017).
 inline void make_frame(const Vec3d& n, Vec3d& s, Vec3d& t) {

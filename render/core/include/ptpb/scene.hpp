@@ -82,7 +82,10 @@ struct Scene {
   std::vector<PointLight> point_lights;
   std::vector<DirectionalLight> directional_lights;
   Vec3d environment_radiance{0, 0, 0};  // constant sky; steady image only (no time origin)
-  double ambient_ior = 1.0;             // region index of the surroundings (kVacuum)
+  // Next-event estimation samples the sky over the hemisphere around this unit vector (zero: the whole
+  // sphere); the rest of the sky is still reached by sampled directions (DESIGN.md §12).
+  Vec3d environment_up{0, 0, 0};
+  double ambient_ior = 1.0;  // region index of the surroundings (kVacuum)
   Camera camera;
   Film film;
 };
