@@ -383,8 +383,11 @@ def test_time_resolved_diffusion_tail_of_a_thick_slab():
     """R(s) ~ s^(-3/2) exp(-sigma_a s) (DESIGN.md §12): fit the power and sigma_a over s = 1-6 m of
     excess OPL, and compare the total with volpath's steady image. The tail starts late: fitted over
     0.3-6 m, the extrapolated-boundary dipole itself gives -1.43 and sigma_a +2.8 % (its image source sits
-    z0 + 4D = 3.9 cm deep), over 1-6 m -1.46 and +1.2 %."""
-    r = render(diffusion_slab(), settings(iterations=1, time_budget_s=30))
+    z0 + 4D = 3.9 cm deep), over 1-6 m -1.46 and +1.2 %. The tail is noisy: one long path lights many late
+    frames at once, so the fit scatters as a whole (10 s runs, seven seeds: power -1.36 to -1.65, sigma_a
+    0.52 to 0.64; merging frames does not help). At 30 s that scatter (about 0.06 in the power) was close to
+    the tolerance, and one seed failed; 90 s keeps it near a third of it."""
+    r = render(diffusion_slab(), settings(iterations=1, time_budget_s=90))
     energy = r.frames.mean(axis=(1, 2, 3))
     s = (np.arange(energy.size) + 0.5) * 0.05
     fit = (s > 1.0) & (s < 6.0)
