@@ -324,7 +324,9 @@ def test_disk_sun_frames_on_the_ptpb_time_axis(tmp_path):
         f"window shift {timing['start_opl_shift_m']:.3f} m (D - R_s = {999 * radius:.3f})"
     )
     alpha = math.radians(0.53) / 2  # the schema's default angular diameter
-    assert timing["start_opl_shift_m"] == pytest.approx(999 * radius + 1000 * radius * math.tan(alpha) ** 2 / 4, rel=1e-9)
+    assert timing["start_opl_shift_m"] == pytest.approx(
+        999 * radius + 1000 * radius * math.tan(alpha) ** 2 / 4, rel=1e-9
+    )
     assert profile[bins[0]] / profile.sum() > 0.999
     np.testing.assert_allclose(frames.sum(0), steady, rtol=1e-4)
     np.testing.assert_allclose(steady / (1000.0 * 0.5 / math.pi), 1.0, atol=0.01)
@@ -360,7 +362,9 @@ def test_wide_disk_sun_arrives_on_average_with_the_plane_wave(tmp_path):
     centres = film.start_opl + film.bin_width_opl * (np.arange(film.temporal_bins) + 0.5)
     mean_tau = float(profile @ centres / profile.sum())
     excess = 100 * radius * math.tan(math.radians(4.0)) ** 2 / 4
-    print(f"wide disk sun: mean arrival {mean_tau:.4f} m, plane wave {predicted:.4f} m, disk's mean excess {excess:.3f} m")
+    print(
+        f"wide disk sun: mean arrival {mean_tau:.4f} m, plane wave {predicted:.4f} m, disk's mean excess {excess:.3f} m"
+    )
     assert profile[0] == 0 and profile[-1] == 0, "test set-up: the window must hold the whole arrival"
     assert abs(mean_tau - predicted) < 0.01
 
