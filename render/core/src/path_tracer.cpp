@@ -145,7 +145,8 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
     for (int hop = 0; hop < 100000 && !next; ++hop) {
       const bool scattering = cs.scattering(medium);
       const Vec3d sigma_t = scattering ? scene.media[medium].sigma_t() : Vec3d{};
-      const double s = scattering ? sample_free_flight(sigma_t, rng) : 0.0;
+      const Vec3d prob = channel_probabilities(weight);
+      const double s = scattering ? sample_free_flight(sigma_t, prob, rng) : 0.0;
       // Inside the clearance sphere no surface can end the flight: no ray needed.
       const bool clear = hop == 0 && scattering && s < clearance;
       const SurfaceHit hit = clear ? SurfaceHit{} : cs.intersect(pos, dir, hop == 0 && !v.surface);
@@ -154,7 +155,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
         const Medium& m = scene.media[medium];
         if (clear || s < dist) {
           const Vec3d tr = transmittance(sigma_t, s);
-          weight = weight * (m.sigma_s * tr) / pdf_mixture(sigma_t, tr);
+          weight = weight * (m.sigma_s * tr) / pdf_mixture(sigma_t, tr, prob);
           const Vec3d clear_centre = v.clear_centre;
           const double clear_radius = clear ? v.clear_radius : 0.0;
           v = PathVertex{};
@@ -172,7 +173,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
         }
         if (!hit.valid) return;
         const Vec3d tr = transmittance(sigma_t, dist);
-        weight = weight * tr / survival_mixture(tr);
+        weight = weight * tr / survival_mixture(tr, prob);
       } else if (cs.attenuating(medium) && hit.valid) {
         weight = weight * transmittance(scene.media[medium].sigma_t(), dist);
       }

@@ -40,6 +40,28 @@ inline double sample_free_flight(const Vec3d& sigma_t, KeyedRng& rng) {
   return -std::log1p(-rng.next_double()) / sigma_t[channel];
 }
 
+// The throughput-weighted mixture of the path tracer (DESIGN.md §12, "Chromatic media"): channel c is picked
+// with probability prob_c = w_c / (w_x + w_y + w_z), w the path's throughput, so that the sum of the
+// throughput's channels never grows over a flight (sigma_s <= sigma_t): no channel can run away over many
+// collisions in a medium whose extinction differs between channels.
+inline Vec3d channel_probabilities(const Vec3d& w) {
+  const double sum = w.x + w.y + w.z;
+  return sum > 0 ? w / sum : Vec3d{1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0};
+}
+inline double sample_free_flight(const Vec3d& sigma_t, const Vec3d& prob, KeyedRng& rng) {
+  const double u = rng.next_double();
+  int channel = u < prob.x ? 0 : (u < prob.x + prob.y ? 1 : 2);
+  if (!(prob[channel] > 0)) channel = prob.y > 0 ? 1 : 0;  // rounding at the top of the unit interval
+  if (!(sigma_t[channel] > 0)) return std::numeric_limits<double>::infinity();
+  return -std::log1p(-rng.next_double()) / sigma_t[channel];
+}
+inline double survival_mixture(const Vec3d& tr, const Vec3d& prob) {
+  return prob.x * tr.x + prob.y * tr.y + prob.z * tr.z;
+}
+inline double pdf_mixture(const Vec3d& sigma_t, const Vec3d& tr, const Vec3d& prob) {
+  return prob.x * sigma_t.x * tr.x + prob.y * sigma_t.y * tr.y + prob.z * sigma_t.z * tr.z;
+}
+
 // Distance at which the largest channel transmittance reaches `cutoff`.
 inline double cutoff_distance(const Vec3d& sigma_t, double cutoff) {
   const double smallest = std::min(sigma_t.x, std::min(sigma_t.y, sigma_t.z));
