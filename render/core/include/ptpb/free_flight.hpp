@@ -27,11 +27,6 @@ inline double pdf_mixture(const Vec3d& sigma_t, double s) {
 inline Vec3d transmittance(const Vec3d& sigma_t, double s) {
   return {std::exp(-sigma_t.x * s), std::exp(-sigma_t.y * s), std::exp(-sigma_t.z * s)};
 }
-// The same two from a transmittance already computed for that distance (no further exponentials).
-inline double survival_mixture(const Vec3d& tr) { return (tr.x + tr.y + tr.z) / 3.0; }
-inline double pdf_mixture(const Vec3d& sigma_t, const Vec3d& tr) {
-  return (sigma_t.x * tr.x + sigma_t.y * tr.y + sigma_t.z * tr.z) / 3.0;
-}
 // A free-flight distance drawn from the channel mixture (§3): a channel picked uniformly, then its
 // exponential; infinite for a channel without extinction (whose second draw is then not made).
 inline double sample_free_flight(const Vec3d& sigma_t, KeyedRng& rng) {
@@ -44,9 +39,10 @@ inline double sample_free_flight(const Vec3d& sigma_t, KeyedRng& rng) {
 // with probability prob_c = w_c / (w_x + w_y + w_z), w the path's throughput, so that the sum of the
 // throughput's channels never grows over a flight (sigma_s <= sigma_t): no channel can run away over many
 // collisions in a medium whose extinction differs between channels.
+constexpr Vec3d kUniformChannels{1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0};
 inline Vec3d channel_probabilities(const Vec3d& w) {
   const double sum = w.x + w.y + w.z;
-  return sum > 0 ? w / sum : Vec3d{1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0};
+  return sum > 0 ? w / sum : kUniformChannels;
 }
 inline double sample_free_flight(const Vec3d& sigma_t, const Vec3d& prob, KeyedRng& rng) {
   const double u = rng.next_double();
@@ -61,6 +57,9 @@ inline double survival_mixture(const Vec3d& tr, const Vec3d& prob) {
 inline double pdf_mixture(const Vec3d& sigma_t, const Vec3d& tr, const Vec3d& prob) {
   return prob.x * sigma_t.x * tr.x + prob.y * sigma_t.y * tr.y + prob.z * sigma_t.z * tr.z;
 }
+// The same for §3's uniform pick, from a transmittance already computed (no further exponentials).
+inline double survival_mixture(const Vec3d& tr) { return survival_mixture(tr, kUniformChannels); }
+inline double pdf_mixture(const Vec3d& sigma_t, const Vec3d& tr) { return pdf_mixture(sigma_t, tr, kUniformChannels); }
 
 // Distance at which the largest channel transmittance reaches `cutoff`.
 inline double cutoff_distance(const Vec3d& sigma_t, double cutoff) {
