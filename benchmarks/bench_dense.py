@@ -3,7 +3,8 @@
 For each row scene (configs/bench/dense_cube.yaml, demo_snow.yaml, thesis_set_1.yaml) this renders a long
 mitransient reference once (two halves, cached in benchmarks/results/cache/, as bench_ptpb.py does), then
 mitransient's transient_prbvolpath in whole passes for at least ``--seconds`` of wall time, then ours in bins
-mode for exactly the time mitransient spent, and reports each one's per-frame relMSE against the reference (its own noise taken out) and their ratio.
+mode for exactly the time mitransient spent, and reports each one's per-frame relMSE against the reference
+(its own noise taken out) and their ratio.
 Ours uses the medium estimator that `auto` picks for the scene (reported per row). Writes
 benchmarks/results/bench_dense.{md,csv}.
 

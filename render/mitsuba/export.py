@@ -124,9 +124,10 @@ def disk_sun_opl_shift(scene: Scene, scene_dir: Path) -> float:
     distance, ⊥ across s). The cross term -q⊥·p⊥ / D is the real sun's spread of directions and averages to
     zero; |q⊥|² / 2D is an artefact of the disk's finite distance, a delay of ρ²/4D = D tan²α / 4 on average
     over the disk's area (radius ρ = D tan α): 4.6 cm on the demo's field (R = 8.7 m), which had put 35 % more
-    energy in our first frame of the dense benchmark's demo row than in the reference's. The window is moved by that mean too, so that the reference's frames
-    are centred on the plane-wave time axis of ptpb (render/core/DESIGN.md §1). The remaining curvature term
-    |p⊥|² / 2D is at most R / 2000 at the default distance of 1000 R."""
+    energy in our first frame of the dense benchmark's demo row than in the reference's. The window is moved
+    by that mean too, so that the reference's frames are centred on the plane-wave time axis of ptpb
+    (render/core/DESIGN.md §1). The remaining curvature term |p⊥|² / 2D is at most R / 2000 at the default
+    distance of 1000 R."""
     suns = _suns(scene, "disk")
     if not suns or _timed_emitters(scene):
         return 0.0

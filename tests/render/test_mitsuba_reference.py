@@ -85,6 +85,13 @@ def sun(to_sun, irradiance, model="directional", **extra) -> dict:
     }
 
 
+def plane_points(cam: Camera, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the pinhole's rays through film positions (px, py) meet the plane z = 0, and how far they go."""
+    d = camera_ray_direction(cam, px.ravel(), py.ravel())
+    t = -cam.origin[2] / d[:, 2]
+    return np.asarray(cam.origin) + t[:, None] * d, t
+
+
 def null_medium(sigma_s, sigma_a, g=0.5, boundary="null", ior=1.0) -> Medium:
     return Medium(sigma_s=tuple(sigma_s), sigma_a=tuple(sigma_a), g=g, ior=ior, boundary=boundary)
 
@@ -270,9 +277,7 @@ def pulse_plane_scene(tmp_path: Path, with_medium: bool) -> tuple[Scene, float]:
     )
     # Predicted τ = |light - x| + |x - camera| for the plane point x of every pixel corner and centre.
     px, py = np.meshgrid(np.linspace(0, cam.width, 33), np.linspace(0, cam.height, 25))
-    d = camera_ray_direction(cam, px.ravel(), py.ravel())
-    t = -cam.origin[2] / d[:, 2]
-    x = np.asarray(cam.origin) + t[:, None] * d
+    x, t = plane_points(cam, px, py)
     tau = np.linalg.norm(x - light, axis=1) + t
     bins = np.floor((tau - film.start_opl) / film.bin_width_opl).astype(int)
     assert bins.min() == bins.max(), "test set-up: the plane's τ range must fall in one bin"
@@ -311,9 +316,7 @@ def test_disk_sun_frames_on_the_ptpb_time_axis(tmp_path):
     )
     # Predicted τ = (P0 - x)·s + |x - camera| over the plane points the film sees.
     px, py = np.meshgrid(np.linspace(0, cam.width, 33), np.linspace(0, cam.height, 25))
-    d = camera_ray_direction(cam, px.ravel(), py.ravel())
-    t = -cam.origin[2] / d[:, 2]
-    x = np.asarray(cam.origin) + t[:, None] * d
+    x, t = plane_points(cam, px, py)
     bins = np.floor(((p0 - x) @ s + t - film.start_opl) / film.bin_width_opl).astype(int)
     assert bins.min() == bins.max(), "test set-up: the plane's τ range must fall in one bin"
     frames, steady, timing = render_transient(scene, tmp_path, spp=16, spp_per_pass=16, quiet=True)
@@ -343,9 +346,7 @@ def test_wide_disk_sun_arrives_on_average_with_the_plane_wave(tmp_path):
     p0 = centre + radius * s
     # Plane-wave τ of the pixel centres: (P0 - x)·s + |x - camera|, nearly one value under a 3° view.
     px, py = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
-    d = camera_ray_direction(cam, px.ravel(), py.ravel())
-    t = -cam.origin[2] / d[:, 2]
-    x = np.asarray(cam.origin) + t[:, None] * d
+    x, t = plane_points(cam, px, py)
     predicted = float(np.mean((p0 - x) @ s + t))
     film = Film(mode="transient", temporal_bins=160, start_opl=round(predicted - 0.4, 2), bin_width_opl=0.005)
     light = sun(s, (1000.0, 1000.0, 1000.0), "disk", disk_distance_radii=100.0, tau_origin_point=p0.tolist())

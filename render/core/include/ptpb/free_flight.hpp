@@ -15,24 +15,9 @@ namespace ptpb {
 // would otherwise keep q = 1 and a path alive without bound.
 constexpr double kMaxSurvival = 0.95;
 
-// Exponential free-flight helpers shared by light and camera tracing (channel-average mixture).
-inline double survival_mixture(const Vec3d& sigma_t, double s) {
-  return (std::exp(-sigma_t.x * s) + std::exp(-sigma_t.y * s) + std::exp(-sigma_t.z * s)) / 3.0;
-}
-inline double pdf_mixture(const Vec3d& sigma_t, double s) {
-  return (sigma_t.x * std::exp(-sigma_t.x * s) + sigma_t.y * std::exp(-sigma_t.y * s) +
-          sigma_t.z * std::exp(-sigma_t.z * s)) /
-         3.0;
-}
+// Exponential free-flight helpers shared by light and camera tracing.
 inline Vec3d transmittance(const Vec3d& sigma_t, double s) {
   return {std::exp(-sigma_t.x * s), std::exp(-sigma_t.y * s), std::exp(-sigma_t.z * s)};
-}
-// A free-flight distance drawn from the channel mixture (§3): a channel picked uniformly, then its
-// exponential; infinite for a channel without extinction (whose second draw is then not made).
-inline double sample_free_flight(const Vec3d& sigma_t, KeyedRng& rng) {
-  const int channel = std::min(2, static_cast<int>(rng.next_double() * 3.0));
-  if (!(sigma_t[channel] > 0)) return std::numeric_limits<double>::infinity();
-  return -std::log1p(-rng.next_double()) / sigma_t[channel];
 }
 
 // The throughput-weighted mixture of the path tracer (DESIGN.md §12, "Chromatic media"): channel c is picked
@@ -44,12 +29,18 @@ inline Vec3d channel_probabilities(const Vec3d& w) {
   const double sum = w.x + w.y + w.z;
   return sum > 0 ? w / sum : kUniformChannels;
 }
+// A channel picked with probabilities `prob`, then its exponential; infinite for a channel without
+// extinction (whose second draw is then not made).
 inline double sample_free_flight(const Vec3d& sigma_t, const Vec3d& prob, KeyedRng& rng) {
   const double u = rng.next_double();
   int channel = u < prob.x ? 0 : (u < prob.x + prob.y ? 1 : 2);
   if (!(prob[channel] > 0)) channel = prob.y > 0 ? 1 : 0;  // rounding at the top of the unit interval
   if (!(sigma_t[channel] > 0)) return std::numeric_limits<double>::infinity();
   return -std::log1p(-rng.next_double()) / sigma_t[channel];
+}
+// A free-flight distance drawn from §3's channel mixture, the channel picked uniformly.
+inline double sample_free_flight(const Vec3d& sigma_t, KeyedRng& rng) {
+  return sample_free_flight(sigma_t, kUniformChannels, rng);
 }
 inline double survival_mixture(const Vec3d& tr, const Vec3d& prob) {
   return prob.x * tr.x + prob.y * tr.y + prob.z * tr.z;
@@ -60,6 +51,9 @@ inline double pdf_mixture(const Vec3d& sigma_t, const Vec3d& tr, const Vec3d& pr
 // The same for §3's uniform pick, from a transmittance already computed (no further exponentials).
 inline double survival_mixture(const Vec3d& tr) { return survival_mixture(tr, kUniformChannels); }
 inline double pdf_mixture(const Vec3d& sigma_t, const Vec3d& tr) { return pdf_mixture(sigma_t, tr, kUniformChannels); }
+// ... and at a distance s (§3's channel-average mixture).
+inline double survival_mixture(const Vec3d& sigma_t, double s) { return survival_mixture(transmittance(sigma_t, s)); }
+inline double pdf_mixture(const Vec3d& sigma_t, double s) { return pdf_mixture(sigma_t, transmittance(sigma_t, s)); }
 
 // Distance at which the largest channel transmittance reaches `cutoff`.
 inline double cutoff_distance(const Vec3d& sigma_t, double cutoff) {
