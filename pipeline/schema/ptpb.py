@@ -117,6 +117,16 @@ class PTPBConfig(StrictModel):
         description="Russian roulette of path-traced camera paths keeps a path with min(this, throughput); dense, "
         "high-albedo media need values near 1 so that paths of hundreds of collisions are not cut (DESIGN.md §12) [-].",
     )
+    path_splits: int = Field(
+        0,
+        ge=0,
+        le=8,
+        description="Splitting in time for path-traced camera paths in bins and gate films: a path doubles this many "
+        "times, as its optical path past its first scattering passes W/2^n, ..., W/4, W/2 of the film's length W, "
+        "so that late frames, lit by the few paths that stay long in dense snow, get more of them; a path that "
+        "can light no frame is rouletted back to one. Pays where late frames are the noisy ones (snow's diffusion "
+        "tail under the sun: the demo uses 3); costs where they are not (render/core/DESIGN.md §12) [-].",
+    )
     # In a pipeline config the next four come from scene.max_depth, scene.rr_depth and the root's seed and
     # threads (pipeline/schema/__init__.py refuses them here); they are fields for direct use of the API.
     max_depth: int = Field(

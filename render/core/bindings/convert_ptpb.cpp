@@ -124,6 +124,7 @@ void for_each_stat(Stats& s, Visit&& visit) {
   visit("path_connections", s.path_connections);
   visit("path_clearance_queries", s.path_clearance_queries);
   visit("path_clear_flights", s.path_clear_flights);
+  visit("path_splits", s.path_splits);
   visit("path_media", s.path_media);
   visit("specular_beams", s.specular_beams);
   visit("specular_pairs", s.specular_pairs);
@@ -277,6 +278,7 @@ RenderSettings parse_settings(const py::dict& d) {
   s.beam_radius_mfp = get<double>(d, "beam_radius_mfp", s.beam_radius_mfp, w);
   s.dense_optical_radius = get<double>(d, "dense_optical_radius", s.dense_optical_radius, w);
   s.path_max_survival = get<double>(d, "path_max_survival", s.path_max_survival, w);
+  s.path_splits = get<int>(d, "path_splits", s.path_splits, w);
   s.max_depth = get<int>(d, "max_depth", s.max_depth, w);
   s.rr_depth = get<int>(d, "rr_depth", s.rr_depth, w);
   s.seed = get<std::uint64_t>(d, "seed", 0, w);

@@ -32,6 +32,44 @@ constexpr double kClearanceReach = 32.0;
 // log-fit (sigma_a +4 to +6 %); at 1e-4 they match the roulette-free renderer.
 constexpr double kNeeBound = 1e-4;
 
+// Splitting in time (DESIGN.md §12, "Splitting in time"): in a bins or gate film a path stands for n = 2^l
+// copies of itself, l the number of the thresholds W/2^L, ..., W/4, W/2 (W the film's length, L =
+// path_splits) that its OPL past its first vertex has passed; once it can light no frame it stands for
+// one again. A path whose n grows splits into copies that each carry 1/ratio of its weight; one whose n
+// falls is rouletted with the ratio. Either way the estimate keeps its expectation.
+constexpr int kMaxPathSplits = 8;
+
+struct TimeSplitting {
+  bool on = false;
+  double origin_tau = 0.0;  // tau of the path's first vertex
+  double tail_start = 0.0;  // film OPL past which no frame receives light
+  int levels = 0;
+  double thresholds[kMaxPathSplits] = {};
+
+  double copies(double tau, double film_tau) const {
+    if (!on || film_tau > tail_start) return 1.0;
+    const double excess = tau - origin_tau;
+    int l = 0;
+    while (l < levels && excess >= thresholds[l]) ++l;
+    return static_cast<double>(1 << l);
+  }
+};
+
+TimeSplitting time_splitting(const Film& film, const RenderSettings& st, double time_half_width, double origin_tau) {
+  TimeSplitting ts;
+  if (film.mode == FrameMode::Steady || film.temporal_bins <= 0 || st.path_splits <= 0) return ts;
+  const double length = film.temporal_bins * film.bin_width_opl;
+  ts.on = true;
+  ts.origin_tau = origin_tau;
+  ts.tail_start = film.start_opl + length + (film.mode == FrameMode::Gate ? time_half_width : 0.0);
+  ts.levels = std::min(st.path_splits, kMaxPathSplits);
+  for (int k = 0; k < ts.levels; ++k) ts.thresholds[k] = std::ldexp(length, k - ts.levels);
+  return ts;
+}
+
+void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathVertex& start, TileStats& ts,
+          const TimeSplitting& split, double copies);
+
 }  // namespace
 
 std::vector<char> media_using_paths(const CompiledScene& cs, const RenderSettings& st, double radius) {
@@ -62,6 +100,14 @@ std::vector<double> specular_beam_radii(const CompiledScene& cs, const RenderSet
 }
 
 void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathVertex& start, TileStats& ts) {
+  const TimeSplitting split = time_splitting(splat.film, *p.st, p.time_half_width, start.tau);
+  walk(p, splat, rng, start, ts, split, 1.0);
+}
+
+namespace {
+
+void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const PathVertex& start, TileStats& ts,
+          const TimeSplitting& split, double copies) {
   const CompiledScene& cs = *p.cs;
   const Scene& scene = cs.scene();
   const RenderSettings& st = *p.st;
@@ -75,6 +121,24 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
   PathVertex v = start;
   for (int guard = 0; guard < 10000000; ++guard) {
     if (!within_depth(v.interactions)) return;
+    // Splitting in time: the copies this path should stand for at this vertex.
+    if (split.on) {
+      const double wanted = split.copies(v.tau, v.tau - unwarp);
+      if (wanted < copies) {
+        if (!(rng.next_double() < wanted / copies)) return;
+        v.weight = v.weight * (copies / wanted);
+        copies = wanted;
+      } else if (wanted > copies) {
+        const int ratio = static_cast<int>(std::lround(wanted / copies));
+        v.weight = v.weight / static_cast<double>(ratio);
+        for (int c = 1; c < ratio; ++c) {
+          KeyedRng child(rng.next_u64(), 0, StreamDomain::PathSplit, static_cast<std::uint64_t>(c));
+          ++ts.path_splits;
+          walk(p, splat, child, v, ts, split, wanted);
+        }
+        copies = wanted;
+      }
+    }
     ++ts.path_vertices;
     const double g = v.surface ? 0.0 : scene.media[v.medium].g;
     // 0. The vertex's clearance: how far it is from every surface (medium vertices only).
@@ -131,7 +195,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
     }
     int interactions = v.interactions;
     if (interactions >= st.rr_depth) {
-      const double q = std::min(st.path_max_survival, max_component(weight));
+      const double q = std::min(st.path_max_survival, max_component(weight) * copies);
       if (!(rng.next_double() < q)) return;
       weight = weight / q;
     }
@@ -220,7 +284,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
         medium = hit.medium_after;
       null_chain = false;
       if (interactions >= st.rr_depth) {
-        const double q = std::min(st.path_max_survival, max_component(weight));
+        const double q = std::min(st.path_max_survival, max_component(weight) * copies);
         if (!(rng.next_double() < q)) return;
         weight = weight / q;
       }
@@ -228,5 +292,7 @@ void trace_path(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, con
     if (!next) return;
   }
 }
+
+}  // namespace
 
 }  // namespace ptpb

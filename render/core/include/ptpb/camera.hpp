@@ -58,6 +58,7 @@ struct TileStats {
   std::uint64_t specular_pairs = 0;
   std::uint64_t surface_queries = 0, surface_pairs = 0;
   std::uint64_t path_vertices = 0, path_connections = 0, path_clearance_queries = 0, path_clear_flights = 0;
+  std::uint64_t path_splits = 0;  // copies made by splitting in time (§12)
 
   // Integer totals: the order in which tiles add them does not matter.
   void add_to(RenderStats& s) const {
@@ -73,6 +74,7 @@ struct TileStats {
     s.path_connections += path_connections;
     s.path_clearance_queries += path_clearance_queries;
     s.path_clear_flights += path_clear_flights;
+    s.path_splits += path_splits;
   }
 };
 

@@ -5,7 +5,7 @@
 
 namespace ptpb {
 
-enum class StreamDomain : std::uint32_t { LightPath = 1, CameraPixel = 2, Test = 3 };
+enum class StreamDomain : std::uint32_t { LightPath = 1, CameraPixel = 2, Test = 3, PathSplit = 4 };
 
 // SplitMix64 finaliser: a bijective avalanche mix, used to hash the key into a PCG state.
 inline std::uint64_t mix64(std::uint64_t z) {
@@ -34,6 +34,12 @@ class KeyedRng {
     const auto xorshifted = static_cast<std::uint32_t>(((old >> 18u) ^ old) >> 27u);
     const auto rot = static_cast<std::uint32_t>(old >> 59u);
     return (xorshifted >> rot) | (xorshifted << ((32u - rot) & 31u));
+  }
+
+  // 64 random bits: the key of a stream derived from this one (a split path's copy, DESIGN.md §12).
+  std::uint64_t next_u64() {
+    const std::uint64_t hi = next_u32(), lo = next_u32();
+    return (hi << 32) | lo;
   }
 
   // Uniform double in [0, 1) with 53 random bits.

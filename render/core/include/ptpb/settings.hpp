@@ -41,6 +41,10 @@ struct RenderSettings {
   double beam_radius_mfp = 0.1;
   double dense_optical_radius = 50.0;
   double path_max_survival = 0.999;
+  // Splitting in time (§12): in bins and gate films a path-traced camera path doubles path_splits times as
+  // its OPL past its first vertex passes W/2^L, ..., W/2 (W the film's length, L = path_splits), and goes
+  // back to one path once it can light no frame.
+  int path_splits = 0;
   int max_depth = -1;  // Mitsuba meaning; -1 unbounded
   int rr_depth = 5;
   std::uint64_t seed = 0;
