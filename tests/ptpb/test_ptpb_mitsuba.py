@@ -29,15 +29,45 @@ def mitsuba_cube(
     rr_depth: int = 5,
     units: float = 1.0,
     shift=(0.0, 0.0, 0.0),
+    tile: int = 0,
 ):
     """The cube in Mitsuba volpath (steady image), or with ``film`` (temporal_bins, start_opl,
     bin_width_opl) in mitransient's transient_prbvolpath: then (frames (T, H, W, 3), steady).
     ``interior`` replaces the cube's medium and ``origin`` the camera position. ``units`` scene units
     make a metre (1000: millimetres), and ``shift`` [m] moves the whole scene: the same physical scene, which
     Mitsuba's single-precision ray offsets (about 9e-5 (1 + |p|) scene units) bias less in dense media when
-    the lit face lies near the origin of a millimetre frame (render/core/DESIGN.md §12)."""
+    the lit face lies near the origin of a millimetre frame (render/core/DESIGN.md §12). With ``tile`` > 0
+    the film is rendered in tiles of that many pixels, each with the whole scene moved so that the point
+    its central ray meets on the cube lies at the origin: there the offsets shrink with the tile's extent
+    instead of the cube's (tiles that miss the cube keep ``shift``)."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("llvm_ad_rgb")
+    if tile <= 0:
+        return _render_cube(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, None)
+    probe = mi.load_dict(_cube_dict(mi, 1, 0, None, interior, origin, max_depth, rr_depth, 1.0, (0, 0, 0), None))
+    sensor = probe.sensors()[0]
+    steady = np.zeros((RES, RES, 3))
+    frames = None if film is None else np.zeros((film["temporal_bins"], RES, RES, 3))
+    corners = [(x0, y0) for y0 in range(0, RES, tile) for x0 in range(0, RES, tile)]
+    for k, (x0, y0) in enumerate(corners):
+        w, h = min(tile, RES - x0), min(tile, RES - y0)
+        centre = mi.Point2f((x0 + 0.5 * w) / RES, (y0 + 0.5 * h) / RES)
+        ray, _ = sensor.sample_ray(0.0, 0.5, centre, mi.Point2f(0.5, 0.5))
+        hit = probe.ray_intersect(ray)
+        moved = tuple(-float(v[0]) for v in hit.p) if bool(hit.is_valid()[0]) else shift
+        # Each tile its own seed: a cropped film numbers its pixels from 0, so equal seeds would repeat streams.
+        key = seed * len(corners) + k
+        out = _render_cube(mi, spp, key, film, interior, origin, max_depth, rr_depth, units, moved, (x0, y0, w, h))
+        if film is None:
+            steady[y0 : y0 + h, x0 : x0 + w] = out
+        else:
+            # mitransient 1.x sizes its transient block by the whole film and fills it from the corner.
+            frames[:, y0 : y0 + h, x0 : x0 + w] = out[0][:, :h, :w]
+            steady[y0 : y0 + h, x0 : x0 + w] = out[1]
+    return steady if film is None else (frames, steady)
+
+
+def _cube_dict(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, crop) -> dict:
     T = mi.ScalarTransform4f
     frame = T().scale(units) @ T().translate(list(shift))
     cam = cube_scene(res=RES)["camera"]
@@ -61,10 +91,11 @@ def mitsuba_cube(
             "height": RES,
             "rfilter": {"type": "box"},
             "temporal_bins": film["temporal_bins"],
-            "start_opl": film["start_opl"],
+            "start_opl": film["start_opl"] * units,
             "bin_width_opl": film["bin_width_opl"] * units,
         }
-        film_dict["start_opl"] *= units
+    if crop is not None:
+        film_dict.update(crop_offset_x=crop[0], crop_offset_y=crop[1], crop_width=crop[2], crop_height=crop[3])
     medium = dict(
         interior
         or {
@@ -76,38 +107,40 @@ def mitsuba_cube(
         }
     )
     medium["scale"] = medium["scale"] / units
-    scene = mi.load_dict(
-        {
-            "type": "scene",
-            "integrator": integrator,
-            "sensor": {
-                # near_clip: Mitsuba's default of 1 cm would start mitransient's OPL 1 cm past the pinhole.
-                "type": "perspective",
-                "fov": 40,
-                "fov_axis": "x",
-                "near_clip": 1e-4 * units,
-                "to_world": T().look_at(
-                    origin=frame @ mi.ScalarPoint3f(cam["origin"]),
-                    target=frame @ mi.ScalarPoint3f(0, 0, 0),
-                    up=[0, 1, 0],
-                ),
-                "film": film_dict,
-                "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
-            },
-            "cube": {
-                "type": "cube",
-                "to_world": frame @ T().scale(0.5),
-                "bsdf": {"type": "null"},
-                "interior": medium,
-            },
-            "light": {
-                "type": "rectangle",
-                "to_world": frame @ T().look_at(origin=[0, 1.5, 0], target=[0, 0, 0], up=[0, 0, 1]) @ T().scale(0.25),
-                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
-                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
-            },
-        }
-    )
+    return {
+        "type": "scene",
+        "integrator": integrator,
+        "sensor": {
+            # near_clip: Mitsuba's default of 1 cm would start mitransient's OPL 1 cm past the pinhole.
+            "type": "perspective",
+            "fov": 40,
+            "fov_axis": "x",
+            "near_clip": 1e-4 * units,
+            "to_world": T().look_at(
+                origin=frame @ mi.ScalarPoint3f(cam["origin"]),
+                target=frame @ mi.ScalarPoint3f(0, 0, 0),
+                up=[0, 1, 0],
+            ),
+            "film": film_dict,
+            "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
+        },
+        "cube": {
+            "type": "cube",
+            "to_world": frame @ T().scale(0.5),
+            "bsdf": {"type": "null"},
+            "interior": medium,
+        },
+        "light": {
+            "type": "rectangle",
+            "to_world": frame @ T().look_at(origin=[0, 1.5, 0], target=[0, 0, 0], up=[0, 0, 1]) @ T().scale(0.25),
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}},
+        },
+    }
+
+
+def _render_cube(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, crop):
+    scene = mi.load_dict(_cube_dict(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, crop))
     if film is None:
         return np.asarray(mi.render(scene, spp=spp), dtype=np.float64)[..., :3]
     steady, transient = mi.render(scene, spp=spp)
