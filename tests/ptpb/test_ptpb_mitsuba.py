@@ -42,9 +42,14 @@ def mitsuba_cube(
     instead of the cube's (tiles that miss the cube keep ``shift``)."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("llvm_ad_rgb")
+    opts = dict(
+        spp=spp, film=film, interior=interior, origin=origin, max_depth=max_depth, rr_depth=rr_depth, units=units
+    )
     if tile <= 0:
-        return _render_cube(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, None)
-    probe = mi.load_dict(_cube_dict(mi, 1, 0, None, interior, origin, max_depth, rr_depth, 1.0, (0, 0, 0), None))
+        return _render_cube(mi, seed=seed, shift=shift, crop=None, **opts)
+    probe = mi.load_dict(
+        _cube_dict(mi, **{**opts, "spp": 1, "film": None, "units": 1.0}, seed=0, shift=(0, 0, 0), crop=None)
+    )
     sensor = probe.sensors()[0]
     steady = np.zeros((RES, RES, 3))
     frames = None if film is None else np.zeros((film["temporal_bins"], RES, RES, 3))
@@ -57,7 +62,7 @@ def mitsuba_cube(
         moved = tuple(-float(v[0]) for v in hit.p) if bool(hit.is_valid()[0]) else shift
         # Each tile its own seed: a cropped film numbers its pixels from 0, so equal seeds would repeat streams.
         key = seed * len(corners) + k
-        out = _render_cube(mi, spp, key, film, interior, origin, max_depth, rr_depth, units, moved, (x0, y0, w, h))
+        out = _render_cube(mi, seed=key, shift=moved, crop=(x0, y0, w, h), **opts)
         if film is None:
             steady[y0 : y0 + h, x0 : x0 + w] = out
         else:
@@ -67,7 +72,7 @@ def mitsuba_cube(
     return steady if film is None else (frames, steady)
 
 
-def _cube_dict(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, crop) -> dict:
+def _cube_dict(mi, *, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, crop) -> dict:
     T = mi.ScalarTransform4f
     frame = T().scale(units) @ T().translate(list(shift))
     cam = cube_scene(res=RES)["camera"]
@@ -139,8 +144,9 @@ def _cube_dict(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units
     }
 
 
-def _render_cube(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, crop):
-    scene = mi.load_dict(_cube_dict(mi, spp, seed, film, interior, origin, max_depth, rr_depth, units, shift, crop))
+def _render_cube(mi, **kw):
+    scene = mi.load_dict(_cube_dict(mi, **kw))
+    spp, film = kw["spp"], kw["film"]
     if film is None:
         return np.asarray(mi.render(scene, spp=spp), dtype=np.float64)[..., :3]
     steady, transient = mi.render(scene, spp=spp)
