@@ -37,17 +37,14 @@ constexpr double kNeeBound = 1e-4;
 // path_splits) that its OPL past its first vertex has passed; once it can light no frame it stands for
 // one again. A path whose n grows splits into copies that each carry 1/ratio of its weight; one whose n
 // falls is rouletted with the ratio. Either way the estimate keeps its expectation.
-constexpr int kMaxPathSplits = 8;
-
 struct TimeSplitting {
-  bool on = false;
   double origin_tau = 0.0;  // tau of the path's first vertex
   double tail_start = 0.0;  // film OPL past which no frame receives light
-  int levels = 0;
+  int levels = 0;           // 0: no splitting
   double thresholds[kMaxPathSplits] = {};
 
   double copies(double tau, double film_tau) const {
-    if (!on || film_tau > tail_start) return 1.0;
+    if (levels == 0 || film_tau > tail_start) return 1.0;
     const double excess = tau - origin_tau;
     int l = 0;
     while (l < levels && excess >= thresholds[l]) ++l;
@@ -59,7 +56,6 @@ TimeSplitting time_splitting(const Film& film, const RenderSettings& st, double 
   TimeSplitting ts;
   if (film.mode == FrameMode::Steady || film.temporal_bins <= 0 || st.path_splits <= 0) return ts;
   const double length = film.temporal_bins * film.bin_width_opl;
-  ts.on = true;
   ts.origin_tau = origin_tau;
   ts.tail_start = film.start_opl + length + (film.mode == FrameMode::Gate ? time_half_width : 0.0);
   ts.levels = std::min(st.path_splits, kMaxPathSplits);
@@ -122,7 +118,7 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
   for (int guard = 0; guard < 10000000; ++guard) {
     if (!within_depth(v.interactions)) return;
     // Splitting in time: the copies this path should stand for at this vertex.
-    if (split.on) {
+    if (split.levels > 0) {
       const double wanted = split.copies(v.tau, v.tau - unwarp);
       if (wanted < copies) {
         if (!(rng.next_double() < wanted / copies)) return;

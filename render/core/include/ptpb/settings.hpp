@@ -13,6 +13,9 @@ enum class AccelKind { Grid, Embree };
 // by its mean free path against the beam radius.
 enum class MediumEstimator { Auto, Beams, Paths };
 
+// The largest path_splits: a path then stands for up to 2^8 copies of itself.
+constexpr int kMaxPathSplits = 8;
+
 struct RenderSettings {
   int iterations = 16;                              // upper bound on iterations
   double time_budget_s = 0.0;                       // wall-clock budget; > 0 stops after the iteration in flight
@@ -44,8 +47,8 @@ struct RenderSettings {
   // Splitting in time (§12): in bins and gate films a path-traced camera path doubles path_splits times as
   // its OPL past its first vertex passes W/2^L, ..., W/2 (W the film's length, L = path_splits), and goes
   // back to one path once it can light no frame.
-  int path_splits = 0;
-  int max_depth = -1;  // Mitsuba meaning; -1 unbounded
+  int path_splits = 0;  // at most kMaxPathSplits
+  int max_depth = -1;   // Mitsuba meaning; -1 unbounded
   int rr_depth = 5;
   std::uint64_t seed = 0;
   int threads = 0;  // 0: all hardware threads
