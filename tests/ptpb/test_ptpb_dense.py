@@ -45,10 +45,12 @@ def mitsuba_dense_cube(
     units: float = 1.0,
     shift=(0.0, 0.0, 0.0),
     tile: int = 0,
+    film: dict | None = None,
 ):
-    """Mitsuba volpath, unbounded depth. Roulette starts late: with Mitsuba's survival cap of 0.95 a path of
-    several hundred collisions is almost never sampled, and the mean comes out low however many samples.
-    ``units`` per metre, ``shift`` and ``tile``: see ``mitsuba_cube``."""
+    """Mitsuba volpath, unbounded depth, or with ``film`` mitransient (then (frames, steady)). Roulette starts
+    late: with Mitsuba's survival cap of 0.95 a path of several hundred collisions is almost never sampled,
+    and the mean comes out low however many samples. ``units`` per metre, ``shift`` and ``tile``: see
+    ``mitsuba_cube``."""
     interior = {
         "type": "homogeneous",
         "scale": float(sigma_t),
@@ -59,6 +61,7 @@ def mitsuba_dense_cube(
     return mitsuba_cube(
         spp,
         seed,
+        film,
         interior=interior,
         origin=CAMERA,
         max_depth=-1,
@@ -283,25 +286,18 @@ def test_dense_cube_frames_against_mitransient(sigma_t, g):
     """Issue 16: per-frame energy within 3 % of mitransient's for every frame holding more than 1 % of it
     (plus three standard errors of the measured noise of the two sides)."""
     film = {"frame_mode": "bins", "temporal_bins": 40, "start_opl": 3.0, "bin_width_opl": 0.1}
-    interior = {
-        "type": "homogeneous",
-        "scale": sigma_t,
-        "sigma_t": {"type": "rgb", "value": [1.0] * 3},
-        "albedo": {"type": "rgb", "value": [0.9995] * 3},
-        "phase": {"type": "hg", "g": g},
-    }
     refs = [
-        mitsuba_cube(
-            8192,
-            s,
-            film=film,
-            interior=interior,
-            origin=CAMERA,
-            max_depth=-1,
+        mitsuba_dense_cube(
+            sigma_t,
+            0.9995,
+            g,
+            spp=8192,
+            seed=s,
             rr_depth=MI_RR,
             units=MI_UNITS,
             shift=MI_SHIFT,
             tile=MI_TILE,
+            film=film,
         )[0].sum(axis=(1, 2, 3))
         for s in range(4)
     ]
