@@ -120,7 +120,7 @@ class PTPBConfig(StrictModel):
     path_splits: int = Field(
         0,
         ge=0,
-        le=8,
+        le=8,  # kMaxPathSplits in render/core/include/ptpb/settings.hpp
         description="Splitting in time for path-traced camera paths in bins and gate films: a path doubles this many "
         "times, as its optical path past its first scattering passes W/2^n, ..., W/4, W/2 of the film's length W, "
         "so that late frames, lit by the few paths that stay long in dense snow, get more of them; a path that "

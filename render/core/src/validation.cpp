@@ -50,7 +50,8 @@ void validate_settings(const RenderSettings& s) {
   require(std::isfinite(s.beam_radius_mfp) && s.beam_radius_mfp > 0, "beam_radius_mfp must be > 0");
   require(s.dense_optical_radius > 0, "dense_optical_radius must be > 0");
   require(s.path_max_survival > 0 && s.path_max_survival < 1, "path_max_survival must lie in (0, 1)");
-  require(s.path_splits >= 0 && s.path_splits <= kMaxPathSplits, "path_splits must lie in [0, 8]");
+  require(s.path_splits >= 0 && s.path_splits <= kMaxPathSplits,
+          "path_splits must lie in [0, " + std::to_string(kMaxPathSplits) + "]");
   require(s.threads >= 0, "threads must be >= 0");
   require(s.tile_size >= 1, "tile_size must be >= 1");
   require(s.snapshot_every >= 0, "snapshot_every must be >= 0");
