@@ -33,7 +33,7 @@ def bench(cells: int, domain: float, days: int) -> dict:
     cfg = GeometryConfig(**{**site, "grid_cells": cells, "domain_size": domain, "days": days, "snapshots": 2})
     rng = np.random.default_rng(1)
     t0 = time.perf_counter()
-    h0 = ablation.initial_height_field(cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
+    h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     t1 = time.perf_counter()
     solid = mesh.decimate(mesh.heightfield_solid(grown.height, cfg.spacing, cfg.base_thickness), cfg.max_triangles)

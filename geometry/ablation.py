@@ -242,12 +242,67 @@ def onset_wavelength(efolding_depth: float) -> float:
     return 2.0 * np.pi * efolding_depth
 
 
-def initial_height_field(
-    n: int, spacing: float, rms: float, wavelength: float | None, rng: np.random.Generator
+# A Gaussian amplitude filter exp(-(k lc)^2 / 8) is below 1e-4 beyond k lc = 8.6: a spectral grid whose
+# Nyquist wavenumber pi m / L reaches that holds the whole correlated surface.
+_SPECTRAL_CUTOFF = 8.6
+_MAX_SPECTRAL_CELLS = 4096
+
+
+def spectral_grid_cells(domain_size: float, correlation_length: float) -> int:
+    """Cells per side of the grid on which a correlated start is drawn (DESIGN.md 3.12): even, and fine
+    enough that its Nyquist wavenumber holds the surface's whole spectrum; it depends on the domain and the
+    correlation length only, never on the growth grid."""
+    cells = 2 * int(np.ceil(_SPECTRAL_CUTOFF * domain_size / (2.0 * np.pi * correlation_length)))
+    if cells > _MAX_SPECTRAL_CELLS:
+        raise ValueError(
+            f"geometry.initial_correlation_length ({correlation_length} m) is too short for geometry.domain_size "
+            f"({domain_size} m): the start would need a {cells}^2 spectral grid (at most {_MAX_SPECTRAL_CELLS}); "
+            "raise the correlation length or shrink the domain"
+        )
+    return max(cells, 8)
+
+
+def correlated_height_field(
+    n: int, spacing: float, rms: float, correlation_length: float, rng: np.random.Generator
 ) -> np.ndarray:
-    """Flat snow plus Gaussian noise [m] with RMS ``rms`` [m]: white (every wavenumber equally) when
-    ``wavelength`` is None, else isotropic band-limited noise with its power centred on ``wavelength``
-    [m] (a Gaussian band of relative width 0.5 in |k|), the explicit override of DESIGN.md 3.12."""
+    """A Gaussian-correlated random surface [m], C(r) = rms^2 exp(-r^2 / lc^2), sampled on an n x n grid.
+
+    The surface is drawn once on a spectral grid set by the domain and lc alone (spectral_grid_cells), so one
+    seed gives the same continuous surface on every growth grid: a finer grid samples it more densely, a grid
+    coarser than the spectral one keeps the modes it can hold (DESIGN.md 3.12). ``rms`` is the RMS of the
+    whole surface; a grid that cannot hold all of it shows a little less."""
+    domain = n * spacing
+    m = spectral_grid_cells(domain, correlation_length)
+    kx, ky = wavenumbers(m, domain / m)
+    amplitude = np.exp(-(kx**2 + ky**2) * correlation_length**2 / 8.0)
+    amplitude[0, 0] = 0.0
+    spectrum = np.fft.fft2(rng.standard_normal((m, m))) * amplitude
+    scale = rms / float(np.real(np.fft.ifft2(spectrum)).std())
+    # Keep the modes both grids hold, Nyquist rows excluded so that the embedded spectrum stays Hermitian.
+    keep = min(m, n) // 2 - 1
+    index = np.r_[0 : keep + 1, -keep:0]
+    embedded = np.zeros((n, n), complex)
+    embedded[np.ix_(index % n, index % n)] = spectrum[np.ix_(index % m, index % m)]
+    return np.real(np.fft.ifft2(embedded)) * (n * n / (m * m)) * scale
+
+
+def initial_height_field(
+    n: int,
+    spacing: float,
+    rms: float,
+    wavelength: float | None,
+    rng: np.random.Generator,
+    correlation_length: float | None = None,
+) -> np.ndarray:
+    """Flat snow plus Gaussian noise [m] with RMS ``rms`` [m] (DESIGN.md 3.12).
+
+    With ``correlation_length`` [m] a Gaussian-correlated surface that is the same at every grid
+    (correlated_height_field); with ``wavelength`` [m] isotropic band-limited noise with its power centred on
+    it (a Gaussian band of relative width 0.5 in |k|, the explicit override); with neither, white noise,
+    whose slopes grow and whose long waves shrink as the cells shrink (so only for the linear-stability
+    starts of V1, where the growth selects the scale)."""
+    if wavelength is None and correlation_length is not None:
+        return correlated_height_field(n, spacing, rms, correlation_length, rng)
     white = rng.standard_normal((n, n))
     if wavelength is None:
         noise = white - white.mean()
@@ -264,6 +319,18 @@ def initial_height_field(
             "the seeded noise band is empty: geometry.initial_wavelength must be between 2 cells and the domain size"
         )
     return noise * (rms / std)
+
+
+def initial_height_field_from_config(cfg, rng: np.random.Generator) -> np.ndarray:
+    """The start of a growth run from a GeometryConfig (pipeline.schema.geometry), DESIGN.md 3.12."""
+    return initial_height_field(
+        cfg.grid_cells,
+        cfg.spacing,
+        cfg.initial_roughness_rms,
+        cfg.initial_wavelength,
+        rng,
+        correlation_length=cfg.initial_correlation_length,
+    )
 
 
 @dataclass(frozen=True)

@@ -44,11 +44,13 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     from tqdm import tqdm
 
     out_dir = Path(out_dir)
+    for warning in cfg.resolution_warnings():
+        log.warning("%s", warning)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     spacing = cfg.spacing
-    h0 = ablation.initial_height_field(cfg.grid_cells, spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng)
+    h0 = ablation.initial_height_field_from_config(cfg, rng)
     settings = ablation.settings_from_config(cfg)
     log.info(
         "growing a %d^2 field of %.3g m for %d days at %.1f deg latitude",

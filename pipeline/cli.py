@@ -59,6 +59,8 @@ def validate(
         raise typer.Exit(code=2)
     cfg = _load_or_exit(config, overrides)
     typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False), nl=False)
+    for warning in cfg.geometry.resolution_warnings():
+        typer.echo(f"warning: {warning}", err=True)
     typer.echo(f"# {config}: valid", err=True)
 
 

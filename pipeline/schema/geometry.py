@@ -6,11 +6,16 @@ site presets in configs/presets/sites/ override them. Symbols follow geometry/DE
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 from pydantic import Field, model_validator
 
 from pipeline.schema.base import StrictModel
+
+# Cells per physical length for a grid-independent field (geometry/DESIGN.md 7, *Grid convergence*).
+CELLS_PER_CORRELATION_LENGTH = 4.0
+CELLS_PER_EFOLDING_DEPTH = 2.0
 
 
 class GeometryConfig(StrictModel):
@@ -140,14 +145,22 @@ class GeometryConfig(StrictModel):
     initial_roughness_rms: float = Field(
         0.02,
         gt=0,
-        description="RMS height of the initial noise, white unless initial_wavelength is set (geometry/DESIGN.md "
-        "3.12) [m].",
+        description="RMS height of the initial roughness, correlated over initial_correlation_length "
+        "(geometry/DESIGN.md 3.12) [m].",
+    )
+    initial_correlation_length: float | None = Field(
+        0.15,
+        gt=0,
+        description="Correlation length lc of the initial roughness, C(r) = rms^2 exp(-r^2/lc^2): the start is one "
+        "continuous random surface, the same at every grid for one seed, and grids with cells of at most lc/4 "
+        "resolve it (geometry/DESIGN.md 3.12, 7). Glacier ice at the season's start [estimate]. null = white "
+        "noise, whose slopes grow as the cells shrink (linear-stability starts such as the lab preset) [m].",
     )
     initial_wavelength: float | None = Field(
         None,
         gt=0,
-        description="Override: centre of a band-limited initial noise, which then imposes the spacing; null (the "
-        "default) starts from white noise and lets optical_efolding_depth select it [m].",
+        description="Override: centre of a band-limited initial noise, which then imposes the spacing (it takes "
+        "precedence over initial_correlation_length); null (the default) lets the growth select the spacing [m].",
     )
     azimuths: int = Field(16, ge=8, le=64, description="Horizon azimuths M [-].")
     bounces: int = Field(2, ge=0, le=8, description="Terrain-reflection (radiosity) bounces n_b [-].")
@@ -169,6 +182,46 @@ class GeometryConfig(StrictModel):
     def spacing(self) -> float:
         """Grid spacing [m]."""
         return self.domain_size / self.grid_cells
+
+    def resolution_warnings(self) -> list[str]:
+        """Why this grid may not hold a grid-independent field, with a grid that would (geometry/DESIGN.md 7,
+        *Grid convergence*): cells must resolve the start's correlation length and the e-folding depth l."""
+        warnings = []
+        needed = []
+        if self.initial_wavelength is None and self.initial_correlation_length is not None:
+            needed.append(
+                (
+                    self.initial_correlation_length / CELLS_PER_CORRELATION_LENGTH,
+                    "geometry.initial_correlation_length",
+                    self.initial_correlation_length,
+                    CELLS_PER_CORRELATION_LENGTH,
+                )
+            )
+        if self.melt_enabled and self.optical_efolding_depth > 0:
+            needed.append(
+                (
+                    self.optical_efolding_depth / CELLS_PER_EFOLDING_DEPTH,
+                    "geometry.optical_efolding_depth",
+                    self.optical_efolding_depth,
+                    CELLS_PER_EFOLDING_DEPTH,
+                )
+            )
+        if needed:
+            finest, key, length, cells = min(needed)
+            if self.spacing > finest * (1.0 + 1e-9):
+                grid = 1 << math.ceil(math.log2(self.domain_size / finest))
+                warnings.append(
+                    f"geometry.grid_cells = {self.grid_cells} gives {100 * self.spacing:.3g} cm cells, coarser than "
+                    f"{key} / {cells:g} = {100 * finest:.3g} cm ({key} = {length} m): the grown field then depends on "
+                    f"the grid. Set geometry.grid_cells: {grid} (or shrink geometry.domain_size to "
+                    f"{self.grid_cells * finest:.3g} m) to resolve it"
+                )
+        if self.melt_enabled and self.initial_wavelength is None and self.initial_correlation_length is None:
+            warnings.append(
+                "geometry.initial_correlation_length is null: a white-noise start steepens and loses its long waves "
+                "as the cells shrink, so the grown field follows the grid; set a correlation length (Tapado 0.15 m)"
+            )
+        return warnings
 
     @model_validator(mode="after")
     def _check_resolution(self) -> GeometryConfig:

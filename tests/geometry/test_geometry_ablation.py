@@ -65,9 +65,7 @@ def test_lab_preset_grows_at_lambda_star():
     spread over the e-folding depth l, so the field selects lambda* = 2 pi l (4.4 cm for l = 7 mm)."""
     cfg = GeometryConfig(**yaml.safe_load((SITES / "lab_micro.yaml").read_text())["geometry"])
     rng = np.random.default_rng(1)
-    h0 = ablation.initial_height_field(
-        cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
-    )
+    h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     assert cfg.initial_wavelength is None  # white noise: nothing seeds the answer
     lambda_star = 2 * np.pi * cfg.optical_efolding_depth
@@ -162,3 +160,31 @@ def test_thin_north_south_walls_fall_and_east_west_walls_stand():
     north_south = grown[:, wall][~wall].mean() - grown[:, middle][~wall].mean()
     assert north_south < 0.2
     assert east_west > 0.8
+
+
+def test_correlated_start_is_one_surface_at_every_grid():
+    """DESIGN.md 3.12: one seed draws one continuous surface, whatever the growth grid. The 128^2 field
+    sampled at every other node is the 64^2 field (both grids hold its whole spectrum), and its RMS and
+    RMS slope are the Gaussian-correlated surface's sigma and sqrt(2) sigma / lc, not the grid's."""
+    rms, lc, domain = 0.03, 0.15, 4.0
+    fields = {
+        n: ablation.initial_height_field(n, domain / n, rms, None, np.random.default_rng(5), correlation_length=lc)
+        for n in (64, 128, 256)
+    }
+    # 64^2 is a little coarser than the spectral grid (74^2): it lacks modes of amplitude ~1e-3.
+    np.testing.assert_allclose(fields[128][::2, ::2], fields[64], atol=5e-3 * rms)
+    np.testing.assert_allclose(fields[256][::2, ::2], fields[128], atol=1e-6 * rms)
+    fine = fields[256]
+    slope = np.gradient(fine, domain / 256, axis=1)
+    # One realisation of a 4 m surface holds ~(4 / 0.15)^2 correlation areas: its statistics scatter by ~5 %.
+    assert fine.std() == pytest.approx(rms, rel=1e-9)
+    assert slope.std() == pytest.approx(np.sqrt(2) * rms / lc, rel=0.1)
+    # A white-noise start is not one surface: its slopes double as the cells halve.
+    white = {n: ablation.initial_height_field(n, domain / n, rms, None, np.random.default_rng(5)) for n in (64, 128)}
+    ratio = np.gradient(white[128], domain / 128, axis=1).std() / np.gradient(white[64], domain / 64, axis=1).std()
+    assert ratio == pytest.approx(2.0, rel=0.1)
+
+
+def test_correlated_start_refuses_a_correlation_length_the_domain_cannot_hold():
+    with pytest.raises(ValueError, match="geometry.initial_correlation_length"):
+        ablation.initial_height_field(64, 100.0 / 64, 0.03, None, np.random.default_rng(0), correlation_length=1e-3)

@@ -21,9 +21,7 @@ REDUCED = dict(grid_cells=64, domain_size=4.0, days=60, snapshots=13)  # a snaps
 def _grow(preset: str):
     cfg = GeometryConfig(**{**load_raw(SITES / preset)["geometry"], **REDUCED})
     rng = np.random.default_rng(7)
-    h0 = ablation.initial_height_field(
-        cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
-    )
+    h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     return cfg, h0, grown
 

@@ -51,9 +51,7 @@ def _season(seed: int) -> dict:
         **{**load_raw(SITES / "tapado.yaml")["geometry"], "grid_cells": N, "domain_size": L, "days": 60, "snapshots": 2}
     )
     rng = np.random.default_rng(seed)
-    h0 = ablation.initial_height_field(
-        cfg.grid_cells, cfg.spacing, cfg.initial_roughness_rms, cfg.initial_wavelength, rng
-    )
+    h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     return metrics.morphology(grown.height, cfg.spacing)
 
