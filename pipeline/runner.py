@@ -29,7 +29,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pipeline.atomic import write_json_atomic
+from pipeline.atomic import final_path, write_json_atomic
 from pipeline.config import config_hash
 from pipeline.lock import hold_run_folder
 from pipeline.log import FILE_ONLY, log_to_file
@@ -141,7 +141,7 @@ def _failure(stage: str, exc: BaseException, staging: Path, final: Path, log_pat
         what = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     filename = exc.filename if isinstance(exc, OSError) else None
     if filename:
-        path = Path(os.fsdecode(filename))
+        path = final_path(os.fsdecode(filename))  # the file being written, not its temporary name
         if path.is_relative_to(staging):  # the staging folder is gone; name the file as it would be published
             path = final / path.relative_to(staging)
         where = f"at {path}"

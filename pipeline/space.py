@@ -56,10 +56,11 @@ def check_space(folder: Path, needs: Mapping[str, int], config) -> None:
     if total <= free:
         return
     camera, film = config.scene.camera, config.scene.film
-    parts = ", ".join(f"{name} {mib(n)}" for name, n in needs.items() if n)
+    unit = mib if mib(total) != mib(free) else (lambda n: f"{n:,} bytes")  # figures that round alike
+    parts = ", ".join(f"{name} {unit(n)}" for name, n in needs.items() if n)
     raise NotEnoughSpace(
-        f"not enough free space in {folder}: the stages to run write about {mib(total)} ({parts}) and its file "
-        f"system has {mib(free)} free, so {', '.join(needs)} did not start. Shrink the output "
+        f"not enough free space in {folder}: the stages to run write about {unit(total)} ({parts}) and its file "
+        f"system has {unit(free)} free, so {', '.join(needs)} did not start. Shrink the output "
         f"(scene.film.temporal_bins = {film.temporal_bins}, scene.camera.width x height = {camera.width} x "
         f"{camera.height}, reference.transient: false) or set runs_dir to a larger file system; "
         "render.memory_budget_gib bounds memory, not disk (its windows write the same frames.npy)"

@@ -180,6 +180,11 @@ def run_cli(monkeypatch, stages: list[Stage], *args: str):
             "at {final}/frames.npy",  # the file as it would have been published, not the removed staging copy
         ),
         (
+            lambda out: OSError(errno.ENOSPC, "No space left on device", str(out / ".transient.tmp-42-0123abcd.mp4")),
+            "No space left on device",
+            "at {final}/transient.mp4",  # the file atomic_path was writing, not its temporary name
+        ),
+        (
             lambda out: OSError("Not enough free space to write 138240000 bytes"),  # numpy's, without a path
             "Not enough free space to write 138240000 bytes",
             "writing {final}",
