@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import secrets
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,6 +21,17 @@ import numpy as np
 def _temporary_sibling(path: Path) -> Path:
     # Keep the suffix: several libraries (OpenImageIO, PyAV, matplotlib) pick the format from it.
     return path.with_name(f".{path.stem}.tmp-{os.getpid()}-{secrets.token_hex(4)}{path.suffix}")
+
+
+_TEMPORARY = re.compile(r"^\.(?P<stem>.+)\.tmp-\d+-[0-9a-f]{8}(?P<suffix>.*)$")
+
+
+def final_path(path: str | os.PathLike[str]) -> Path:
+    """The name a temporary file of ``atomic_path`` is renamed to (``path`` itself for any other file):
+    what an error message should name."""
+    path = Path(path)
+    match = _TEMPORARY.match(path.name)
+    return path.with_name(match["stem"] + match["suffix"]) if match else path
 
 
 def _fsync_file(path: Path) -> None:

@@ -5,14 +5,18 @@ from __future__ import annotations
 import json
 import logging
 import sys
+import traceback
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 import yaml
 
 from pipeline.config import ConfigError, load_config
+from pipeline.lock import RunFolderBusy, hold_run_folder
 from pipeline.log import setup_logging
-from pipeline.runner import StageError, run_dir, run_stages
+from pipeline.runner import StageError, StageFailed, run_dir, run_stages
+from pipeline.space import NotEnoughSpace
 
 app = typer.Typer(
     help="Penitentes pipeline: geometry -> scene -> render (ours, reference) -> composite -> compare.",
@@ -26,6 +30,14 @@ CONFIG_ARG = typer.Argument(..., help="YAML config file.", exists=False, dir_oka
 SET_OPTION = typer.Option(
     None, "--set", "-s", help="Override one key, e.g. --set render.iterations=16 (value in YAML syntax). Repeatable."
 )
+
+
+# Exit codes of `pipeline run` (README.md, "The pipeline"): 2 is also typer's for a bad command line.
+EXIT_FAILED = 1  # a stage failed, or the run could not start (a missing upstream stage, input file)
+EXIT_CONFIG = 2  # the config or the command line is wrong
+EXIT_BUSY = 3  # --no-wait, and another process holds the run folder
+EXIT_NO_SPACE = 4  # the stages to run would not fit on the run folder's disk; nothing ran
+EXIT_INTERRUPTED = 130  # Ctrl-C
 
 
 def _load_or_exit(config_path: Path, overrides: list[str] | None):
@@ -102,8 +114,17 @@ def run(
     ),
     cores: str | None = typer.Option(None, "--cores", "-c", help="With --profile: cores for local jobs."),
     dry_run: bool = typer.Option(False, "--dry-run", "-n", help="With --profile: print the jobs; run nothing."),
+    no_wait: bool = typer.Option(
+        False, "--no-wait", help="Refuse at once (exit 3) when another run holds runs/<name>/, instead of waiting."
+    ),
+    debug: bool = typer.Option(
+        False, "--debug", help="On a failure, print the traceback too (it is always in runs/<name>/run.log)."
+    ),
 ) -> None:
-    """Run the pipeline on CONFIG. Finished stages whose inputs did not change are skipped."""
+    """Run the pipeline on CONFIG. Finished stages whose inputs did not change are skipped.
+
+    Exit codes: 0 done, 1 a stage failed, 2 a bad config or option, 3 the run folder is in use (--no-wait),
+    4 not enough disk space (nothing ran), 130 interrupted."""
     setup_logging(quiet)
     cfg = _load_or_exit(config, overrides)
     from pipeline.stages import STAGES
@@ -133,19 +154,34 @@ def run(
             )
         raise typer.Exit(code=code)
     try:
-        results = run_stages(cfg, STAGES, only=stage, force=force, quiet=quiet, resume=resume, shards=shards)
-    except (StageError, ConfigError, ValueError, FileNotFoundError) as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(code=1) from None
+        results = run_stages(
+            cfg, STAGES, only=stage, force=force, quiet=quiet, resume=resume, shards=shards, wait=not no_wait
+        )
+    except RunFolderBusy as exc:
+        _fail(exc, EXIT_BUSY, debug)
+    except NotEnoughSpace as exc:
+        _fail(exc, EXIT_NO_SPACE, debug)
+    except StageFailed as exc:
+        _fail(exc, EXIT_FAILED, debug, exc.__cause__)
+    except (StageError, ConfigError, ValueError, OSError) as exc:
+        _fail(exc, EXIT_FAILED, debug)
     except KeyboardInterrupt:
         typer.echo("interrupted: finished stages are kept; the interrupted one left nothing behind", err=True)
-        raise typer.Exit(code=130) from None
+        raise typer.Exit(code=EXIT_INTERRUPTED) from None
     typer.echo(f"\nRun '{cfg.name}': outputs under {run_dir(cfg).resolve()}")
     for result in results:
         took = f"{result.seconds:7.1f} s" if result.status == "ran" else "        "
         typer.echo(f"  {result.name:<10} {result.status:<9} {took}  {result.out_dir}")
         if result.summary and result.status == "ran":
             typer.echo("             " + json.dumps(result.summary, default=str)[:300])
+
+
+def _fail(exc: BaseException, code: int, debug: bool, cause: BaseException | None = None) -> NoReturn:
+    """One line on stderr for ``exc`` (and with ``debug`` the traceback of ``cause`` or ``exc``), then exit."""
+    if debug:
+        traceback.print_exception(cause or exc, file=sys.stderr)
+    typer.echo(f"error: {exc}", err=True)
+    raise typer.Exit(code=code) from None
 
 
 @app.command()
@@ -172,10 +208,12 @@ def shard(
         )
         raise typer.Exit(code=1)
     try:
-        record = run_render_shard(
-            base / "scene", cfg.render_settings(), shards_dir(base, "render"), index, shards, quiet=quiet
-        )
-    except ValueError as exc:
+        # Shared: the other shards run beside this one, a `pipeline run` of the same folder waits for them all.
+        with hold_run_folder(base, shared=True):
+            record = run_render_shard(
+                base / "scene", cfg.render_settings(), shards_dir(base, "render"), index, shards, quiet=quiet
+            )
+    except (ValueError, OSError) as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=1) from None
     typer.echo(f"shard {index + 1}/{shards}: iterations {record.get('first_iteration')}..{record.get('end_iteration')}")

@@ -10,6 +10,11 @@ A stage that can resume (the render stage) keeps its progress in ``runs/<name>/.
 outside the staging swap. The runner owns that folder's life: it is removed before a stage runs
 without ``resume`` (a stale checkpoint never leaks into a fresh run) and once the stage's output
 is published.
+
+A run holds the run folder's lock (pipeline/lock.py) for as long as it writes there, logs to
+``runs/<name>/run.log``, checks the free disk space against what its stages will write before it
+starts them (pipeline/space.py), and turns any failure inside a stage into one ``StageFailed`` whose
+message names the stage and the path; the traceback goes to the log file only.
 """
 
 from __future__ import annotations
@@ -24,8 +29,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pipeline.atomic import write_json_atomic
+from pipeline.atomic import final_path, write_json_atomic
 from pipeline.config import config_hash
+from pipeline.lock import hold_run_folder
+from pipeline.log import FILE_ONLY, log_to_file
 from pipeline.manifest import (
     MANIFEST_NAME,
     MANIFEST_VERSION,
@@ -35,6 +42,7 @@ from pipeline.manifest import (
     outputs_intact,
     read_manifest,
 )
+from pipeline.space import check_space
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +72,7 @@ class Stage:
     upstream: tuple[str, ...] = ()
     description: str = ""
     enabled: Callable[[Any], bool] = field(default=lambda config: True)
+    writes: Callable[[Any], int] = field(default=lambda config: 0)  # estimated bytes of its large arrays
 
 
 @dataclass
@@ -77,6 +86,19 @@ class StageResult:
 
 class StageError(RuntimeError):
     """A stage could not run; the message says which and why."""
+
+
+class StageFailed(StageError):
+    """A stage raised; the message names the stage, what happened and where. The original exception is
+    the ``__cause__``, and its traceback is in the run's log file (``log_path``)."""
+
+    def __init__(self, stage: str, what: str, where: str, log_path: Path) -> None:
+        super().__init__(f"stage {stage} failed: {what}, {where}")
+        self.stage = stage
+        self.log_path = log_path
+
+
+RUN_LOG = "run.log"
 
 
 def run_dir(config) -> Path:
@@ -109,6 +131,47 @@ def _publish(staging: Path, final: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
+def _failure(stage: str, exc: BaseException, staging: Path, final: Path, log_path: Path) -> StageFailed:
+    """``exc``, raised while ``stage`` wrote into ``staging``, as one line that names the path."""
+    if isinstance(exc, OSError) and exc.strerror:
+        what = exc.strerror  # "No space left on device"; the path follows
+    elif isinstance(exc, (OSError, ValueError, RuntimeError)) and str(exc):
+        what = str(exc)  # numpy's "Not enough free space to write N bytes", our own errors
+    else:
+        what = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    filename = exc.filename if isinstance(exc, OSError) else None
+    if filename:
+        path = final_path(os.fsdecode(filename))  # the file being written, not its temporary name
+        if path.is_relative_to(staging):  # the staging folder is gone; name the file as it would be published
+            path = final / path.relative_to(staging)
+        where = f"at {path}"
+    else:
+        where = f"writing {final}"
+    return StageFailed(stage, what, f"{where} ({final} is as before the run; traceback in {log_path})", log_path)
+
+
+def _planned(config, stages: Sequence[Stage], only: Sequence[str] | None, force: bool) -> list[Stage]:
+    """The selected stages that will probably run: those without a manifest of the current config, and
+    those downstream of one that runs. Only a guess for the space check (it reads no outputs): a stage
+    whose outputs turn out damaged is checked again just before it starts."""
+    base = run_dir(config)
+    planned: list[Stage] = []
+    running: set[str] = set()
+    for stage in stages:
+        if not stage.enabled(config) or (only is not None and stage.name not in only):
+            continue
+        manifest = read_manifest(base / stage.name)
+        if (
+            force
+            or manifest is None
+            or manifest.get("config_hash") != config_hash(config, stage.config_keys)
+            or running.intersection(stage.upstream)
+        ):
+            planned.append(stage)
+            running.add(stage.name)
+    return planned
+
+
 def stage_status(config, stage: Stage, inputs_digests: dict[str, str]) -> tuple[bool, dict | None]:
     """Whether the stage's finished output matches the current config and inputs."""
     final = run_dir(config) / stage.name
@@ -131,6 +194,8 @@ def run_stages(
     quiet: bool = False,
     resume: bool = False,
     shards: int = 1,
+    wait: bool = True,
+    on_wait: Callable[[str], None] | None = None,
 ) -> list[StageResult]:
     """Run ``stages`` (already in dependency order) for ``config``; return what happened to each.
 
@@ -138,13 +203,33 @@ def run_stages(
     ``force`` re-runs the selected stages even when their manifests match.
     ``shards`` splits the render's iterations (render/ptpb/split.py); finished shards are kept in
     ``.<stage>.shards/`` until the stage is published.
+    While another process holds the run folder, wait for it (``on_wait`` gets the message that names
+    it) or, with ``wait=False``, raise ``pipeline.lock.RunFolderBusy``. ``NotEnoughSpace`` when the
+    stages to run would not fit on the disk; ``StageFailed`` when a stage raises.
     """
     by_name = {s.name: s for s in stages}
     for name in only or ():
         if name not in by_name:
             raise StageError(f"unknown stage '{name}'; the stages are: {', '.join(by_name)}")
     base = run_dir(config)
-    base.mkdir(parents=True, exist_ok=True)
+    with hold_run_folder(base, wait=wait, on_wait=on_wait), log_to_file(base / RUN_LOG):
+        log.info("run '%s' in %s", config.name, base)
+        check_space(base, {s.name: s.writes(config) for s in _planned(config, stages, only, force)}, config)
+        return _run_locked(config, stages, by_name, only, force, quiet, resume, shards)
+
+
+def _run_locked(
+    config,
+    stages: Sequence[Stage],
+    by_name: dict[str, Stage],
+    only: Sequence[str] | None,
+    force: bool,
+    quiet: bool,
+    resume: bool,
+    shards: int,
+) -> list[StageResult]:
+    base = run_dir(config)
+    log_path = base / RUN_LOG
     digests: dict[str, str] = {}
     results: list[StageResult] = []
     for stage in stages:
@@ -176,6 +261,7 @@ def run_stages(
             shutil.rmtree(progress_dir, ignore_errors=True)
             results.append(StageResult(stage.name, "skipped", final, summary=manifest.get("summary")))
             continue
+        check_space(base, {stage.name: stage.writes(config)}, config)  # others may have filled the disk since
         _remove_leftovers(base, stage.name)
         if not resume:
             shutil.rmtree(progress_dir, ignore_errors=True)
@@ -197,26 +283,31 @@ def run_stages(
         )
         try:
             summary = stage.func(context) or {}
-        except BaseException:
+            seconds = time.perf_counter() - t0
+            outputs = hash_outputs(staging)
+            record = {
+                "version": MANIFEST_VERSION,
+                "stage": stage.name,
+                "run": config.name,
+                "config_keys": list(stage.config_keys),
+                "config_hash": config_hash(config, stage.config_keys),
+                "inputs": inputs,
+                "outputs": outputs,
+                "outputs_digest": outputs_digest(outputs),
+                "git_revision": git_revision(),
+                "started_utc": started.isoformat(timespec="seconds"),
+                "seconds": round(seconds, 3),
+                "summary": summary,
+            }
+            write_json_atomic(staging / MANIFEST_NAME, record)
+        except Exception as exc:
+            shutil.rmtree(staging, ignore_errors=True)
+            failure = _failure(stage.name, exc, staging, final, log_path)
+            log.error("%s", failure, exc_info=exc, extra={FILE_ONLY: True})
+            raise failure from exc
+        except BaseException:  # Ctrl-C, SystemExit: nothing to explain, nothing left behind
             shutil.rmtree(staging, ignore_errors=True)
             raise
-        seconds = time.perf_counter() - t0
-        outputs = hash_outputs(staging)
-        record = {
-            "version": MANIFEST_VERSION,
-            "stage": stage.name,
-            "run": config.name,
-            "config_keys": list(stage.config_keys),
-            "config_hash": config_hash(config, stage.config_keys),
-            "inputs": inputs,
-            "outputs": outputs,
-            "outputs_digest": outputs_digest(outputs),
-            "git_revision": git_revision(),
-            "started_utc": started.isoformat(timespec="seconds"),
-            "seconds": round(seconds, 3),
-            "summary": summary,
-        }
-        write_json_atomic(staging / MANIFEST_NAME, record)
         _publish(staging, final)
         shutil.rmtree(progress_dir, ignore_errors=True)  # the published output supersedes it
         shutil.rmtree(shards_dir(base, stage.name), ignore_errors=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import datetime
 
 from pipeline.runner import Stage, StageContext
+from pipeline.space import film_bytes, image_bytes
 
 
 def geometry_stage(ctx: StageContext) -> dict:
@@ -35,6 +36,26 @@ def reference_stage(ctx: StageContext) -> dict:
     return run_reference_stage(
         ctx.inputs["scene"], ctx.config.reference, ctx.out_dir, seed=ctx.config.seed, quiet=ctx.quiet
     )
+
+
+def reference_writes(config) -> int:
+    """The reference's large arrays: steady.npy and .exr; frames.npy, its EXR frames (counted uncompressed)
+    and transient_steady.npy."""
+    ref = config.reference
+    steady = 2 * image_bytes(config) if ref.steady else 0
+    transient = 2 * film_bytes(config) + image_bytes(config) if ref.transient else 0
+    return steady + transient
+
+
+def render_writes(config) -> int:
+    """Our render's large arrays: frames.npy, steady.npy and .exr, snapshots.npz, and the checkpoint (the
+    frame sums and six steady-sized float64 sums, twice while a new checkpoint replaces the last)."""
+    r = config.render
+    frames = 0 if (r.frame_mode or config.scene.film.frame_mode) == "steady" else film_bytes(config)
+    image = image_bytes(config)
+    snapshots = r.iterations // r.snapshot_every * image if r.snapshot_every else 0
+    checkpoint = 2 * (frames + 6 * image) if r.checkpoint_every_iterations or r.checkpoint_every_s else 0
+    return frames + 2 * image + snapshots + checkpoint
 
 
 def render_stage(ctx: StageContext) -> dict:
@@ -119,6 +140,7 @@ STAGES: list[Stage] = [
         upstream=("scene",),
         description="Mitsuba 3 volpath steady image and mitransient frames",
         enabled=lambda c: c.reference.steady or c.reference.transient,
+        writes=reference_writes,
     ),
     Stage(
         "render",
@@ -126,6 +148,7 @@ STAGES: list[Stage] = [
         ("render", "seed", "threads", "scene.max_depth", "scene.rr_depth"),
         upstream=("scene",),
         description="our PTPB render: steady image, frames and statistics",
+        writes=render_writes,
     ),
     Stage(
         "composite",
