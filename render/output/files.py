@@ -76,16 +76,16 @@ class FrameAxis:
 WINDOW_BYTES = 64 * 2**20  # what a pass over a film holds of it at a time
 
 
-def frame_windows(frames: np.ndarray, window_bytes: int = WINDOW_BYTES) -> Iterator[tuple[int, np.ndarray]]:
-    """``(first frame, frames)`` windows of a (T, ...) stack, each a copy of at most ``window_bytes`` (at
-    least one frame), so that a pass over a film larger than memory holds a window at a time.
+def frame_windows(frames: np.ndarray, window_bytes: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """``(first frame, frames)`` windows of a (T, ...) stack, each a copy of at most ``window_bytes``
+    (``WINDOW_BYTES`` by default; at least one frame), so that a pass over a film larger than memory holds a window at a time.
 
     A memory-mapped stack (``RenderOutputs.frames(memory_mapped=True)``) has its pages dropped from the
     process after each window: mapped pages count in the resident size until unmapped, and a pass over
     the 6 GiB of a full video's film would otherwise show as 6 GiB resident (they stay in the page cache,
     so a second pass reads them back from memory)."""
     frame_bytes = max(1, int(np.prod(frames.shape[1:])) * frames.dtype.itemsize)
-    step = max(1, window_bytes // frame_bytes)
+    step = max(1, (WINDOW_BYTES if window_bytes is None else window_bytes) // frame_bytes)
     mapping = getattr(frames, "_mmap", None)  # numpy.memmap keeps its mmap.mmap there
     for first in range(0, len(frames), step):
         yield first, np.array(frames[first : first + step])
