@@ -43,8 +43,9 @@ def measure(image: np.ndarray, reference: np.ndarray | None = None, to_bins=None
     from render.output.files import frame_windows
 
     stack = image if image.ndim == 4 else image[None]
-    paired = reference is not None and reference.shape == image.shape
-    references = frame_windows(reference if reference.ndim == 4 else reference[None]) if paired else repeat(None)
+    references: Any = repeat(None)
+    if reference is not None and reference.shape == image.shape:
+        references = frame_windows(reference if reference.ndim == 4 else reference[None])
     sums, count = np.zeros(3), 0
     squared = relative = 0.0
     image_sum = reference_sum = None

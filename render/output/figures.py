@@ -193,7 +193,7 @@ class ArrivalTimes:
     def __init__(self, total_luminance: np.ndarray, bin_width_opl: float, fraction: float = 0.05) -> None:
         self.total = np.asarray(total_luminance, np.float64)
         self.bin_width_opl, self.fraction = bin_width_opl, fraction
-        self.arrival = np.full(self.total.shape, np.nan)
+        self.arrival: np.ndarray = np.full(self.total.shape, np.nan)
         self.running = np.zeros(self.total.shape)
 
     def add(self, k: int, frame_luminance: np.ndarray) -> None:
@@ -206,7 +206,7 @@ class ArrivalTimes:
 
 def time_of_arrival_map(times: ArrivalTimes, path: Path, title: str) -> list[Path]:
     """The arrival times in a perceptual colour map (viridis); pixels without light are blank."""
-    height, width = times.arrival.shape
+    height, width = times.arrival.shape[:2]
     fig, ax = plt.subplots(figsize=(6.5, 6.5 * height / width + 0.5))
     shown = ax.imshow(times.arrival, cmap="viridis", interpolation="nearest")
     label = f"time of arrival ({times.fraction:.0%} of the light), ns since first light"
