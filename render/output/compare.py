@@ -15,7 +15,7 @@ from pipeline.atomic import write_text_atomic
 from render.output.agreement import agreement
 from render.output.figures import error_curves
 from render.output.files import RenderOutputs
-from render.output.metrics import mean_radiance, relmse, rmse
+from render.output.metrics import RELMSE_EPSILON, relmse
 
 log = logging.getLogger(__name__)
 
@@ -34,8 +34,47 @@ COLUMNS = [
 ]
 
 
-def _row(renderer, quantity, seconds, count, image, reference, memory) -> dict[str, Any]:
-    means = mean_radiance(image)
+def measure(image: np.ndarray, reference: np.ndarray | None = None, to_bins=None) -> dict[str, Any]:
+    """Per-channel means of an image or (T, H, W, 3) stack and, against a reference of its shape, relMSE, RMSE
+    and the agreement, a window of frames at a time (``to_bins``: the image's FrameAxis, converting gate
+    frames window by window); the stacks may be memory-mapped films."""
+    from itertools import repeat
+
+    from render.output.files import frame_windows
+
+    stack = image if image.ndim == 4 else image[None]
+    references: Any = repeat(None)
+    if reference is not None and reference.shape == image.shape:
+        references = frame_windows(reference if reference.ndim == 4 else reference[None])
+    sums, count = np.zeros(3), 0
+    squared = relative = 0.0
+    image_sum = reference_sum = None
+    for (_, window), pair in zip(frame_windows(stack), references):
+        x = np.asarray(to_bins.as_bins(window) if to_bins is not None else window, np.float64)
+        if not np.isfinite(x).all():
+            raise ValueError("render or reference contains NaN or infinite values")
+        sums += x.reshape(-1, 3).sum(axis=0)
+        count += x.size // 3
+        if pair is not None:
+            r = np.asarray(pair[1], np.float64)
+            if not np.isfinite(r).all():
+                raise ValueError("render or reference contains NaN or infinite values")
+            error = (x - r) ** 2
+            squared += float(error.sum())
+            relative += float((error / (r**2 + RELMSE_EPSILON)).sum())
+            image_sum = x.sum(axis=0) if image_sum is None else image_sum + x.sum(axis=0)
+            reference_sum = r.sum(axis=0) if reference_sum is None else reference_sum + r.sum(axis=0)
+    measured: dict[str, Any] = {"means": [float(v) for v in sums / max(1, count)]}
+    if image_sum is not None and reference_sum is not None:
+        values = count * 3
+        measured.update(relmse=relative / values, rmse=float(np.sqrt(squared / values)))
+        measured["agreement"] = agreement(image_sum, reference_sum)  # its tiles sum the frames first
+    return measured
+
+
+def _row(renderer, quantity, seconds, count, image, reference, memory, to_bins=None) -> dict[str, Any]:
+    measured = measure(image, reference, to_bins)
+    means = measured["means"]
     row = {
         "renderer": renderer,
         "quantity": quantity,
@@ -45,15 +84,13 @@ def _row(renderer, quantity, seconds, count, image, reference, memory) -> dict[s
         "mean_g": means[1],
         "mean_b": means[2],
         "peak_memory_mib": memory,
-        "relmse": None,
-        "rmse": None,
+        "relmse": measured.get("relmse"),
+        "rmse": measured.get("rmse"),
         "agreement": None,
         "disagrees": False,
     }
-    if reference is not None and reference.shape == image.shape:
-        row["relmse"] = relmse(image, reference)
-        row["rmse"] = rmse(image, reference)
-        verdict = agreement(image, reference)
+    if "agreement" in measured:
+        verdict = measured["agreement"]
         row["agreement"], row["disagrees"] = verdict.text(), verdict.disagrees
         if verdict.disagrees:
             log.warning("compare: %s %s %s", renderer, quantity, verdict.text())
@@ -89,9 +126,9 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: 
     ref_timing = reference.stats if reference else {}
     rows: list[dict[str, Any]] = []
     steady_ref = reference.steady() if reference else None
-    frames_ref = reference.frames() if reference else None
+    frames_ref = reference.frames(memory_mapped=True) if reference else None
     steady_ours = ours.steady() if ours else None
-    frames_ours = ours.frames_as_bins() if ours else None
+    frames_ours = ours.frames(memory_mapped=True) if ours else None
     ours_seconds = ours_stats.get("seconds") or ours_stats.get("time_total_s")
     ours_iterations = ours_stats.get("iterations")
     ours_memory = ours_stats.get("peak_memory_mib")
@@ -107,6 +144,7 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: 
                 frames_ours,
                 frames_ref,
                 ours_memory,
+                to_bins=ours.axis,
             )
         )
     for renderer, quantity, image, part in (
@@ -185,11 +223,22 @@ def key_results(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
-def report_lead(rows: list[dict[str, Any]]) -> str:
-    """HTML for the report's first screen: the key results, then the table with units and a caption."""
+def report_lead(rows: list[dict[str, Any]], stages: dict[str, dict[str, Any]] | None = None) -> str:
+    """HTML for the report's first screen: the key results (and the stages' own peak memory), then the table
+    with units and a caption."""
     import html
 
-    items = "".join(f"<li>{html.escape(line)}</li>" for line in key_results(rows))
+    lines = key_results(rows)
+    if stages:
+        lines.append(
+            "Stage peak memory (resident, pipeline/memory.py): "
+            + "; ".join(
+                f"{name} {record['peak_memory_mib']:.0f} MiB ({record['peak_memory_added_mib']:.0f} MiB above its start)"
+                for name, record in stages.items()
+            )
+            + "."
+        )
+    items = "".join(f"<li>{html.escape(line)}</li>" for line in lines)
     items += "".join(
         f"<li class='disagrees'>Warning: ours and the reference disagree, {html.escape(r['quantity'])}: "
         f"{html.escape(r['agreement'])}. The images are not the same light transport; see "
@@ -218,14 +267,31 @@ def run_compare_stage(
     run_root: Path, ours_dir: Path | None, reference_dir: Path | None, out_dir: Path, stage_names, title: str
 ) -> dict:
     """The `compare` stage: the table, the error plot and ``report.html`` linking every stage's files."""
+    from pipeline.memory import PeakMemory
     from render.output.report import write_report
 
-    result = compare_renders(ours_dir, reference_dir, out_dir)
+    with PeakMemory() as memory:  # the stage's own peak (pipeline/memory.py), reported beside the composite's
+        result = compare_renders(ours_dir, reference_dir, out_dir)
     write_report(
         out_dir / "report.html",
         run_root,
         [n for n in stage_names if n != "compare"],
         title,
-        lead_html=report_lead(result["rows"]),
+        lead_html=report_lead(result["rows"], stage_memory(run_root, memory.record())),
     )
-    return {"rows": [{k: r[k] for k in ("renderer", "quantity", "seconds", "relmse")} for r in result["rows"]]}
+    rows = [{k: r[k] for k in ("renderer", "quantity", "seconds", "relmse")} for r in result["rows"]]
+    return {"rows": rows, **memory.record()}
+
+
+def stage_memory(run_root: Path, compare: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The peak memory of the composite stage (from its manifest's summary) and of this compare."""
+    import json
+
+    stages = {}
+    manifest = run_root / "composite" / "manifest.json"
+    if manifest.is_file():
+        summary = json.loads(manifest.read_text(encoding="utf-8")).get("summary") or {}
+        if "peak_memory_mib" in summary:
+            stages["composite"] = summary
+    stages["compare"] = compare
+    return stages

@@ -1,31 +1,47 @@
-"""Transient frames -> videos (light in flight, and light filling the scene), streak images and
-side-by-side comparisons. Pure array work plus the writers in render.output.video and render.output.figures.
+"""Transient frames -> videos (light in flight, and light filling the scene), streak images, EXR frames and
+side-by-side comparisons. Pure array work plus the writers in render.output.video, render.output.figures and
+render.output.exr.
+
+A film is read in two passes, a window of frames at a time (``frame_windows``), so that compositing holds a
+few frames and the fixed images (sums, the streak slabs, the arrival map) however long the film is
+(render/output/LOOK.md, "Memory"). The first pass measures (``FilmStatistics``: the luminance histograms
+that set the exposures, the sum over the frames); the second tone-maps each frame once and hands it to
+every output it feeds (``composite_film``): the 8-bit, 10-bit, cumulative and light-in-flight encoders, the
+EXR writer, the streak slabs and the arrival times.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
 from pipeline.atomic import atomic_path
-from render.output.figures import relative_difference, side_by_side_still, streak_image
-from render.output.files import FrameAxis, RenderOutputs
-from render.output.tonemap import display_frames, display_values, exposure_scale, to_display
-from render.output.video import annotate, format_time, upscale, write_mp4
+from pipeline.memory import PeakMemory
+from render.output.figures import ArrivalTimes, relative_difference, side_by_side_still, streak_image
+from render.output.files import FrameAxis, RenderOutputs, frame_windows
+from render.output.tonemap import LuminanceHistogram, display_values, exposure_scale, luminance, to_display
+from render.output.video import Mp4Writer, annotate, format_time, upscale
 
 log = logging.getLogger(__name__)
 
+CLIP_EXPOSURE_FRAMES = 64  # the clip's exposure comes from at most this many evenly spaced frames
+
 
 def check_frames(frames: np.ndarray, name: str = "frames") -> np.ndarray:
-    frames = np.asarray(frames)
+    """The shape check; the values are checked for NaN as ``FilmStatistics.measure`` reads them."""
+    frames = np.asanyarray(frames)
     if frames.ndim != 4 or frames.shape[-1] != 3:
         raise ValueError(f"{name} must have shape (T, H, W, 3), got {frames.shape}")
-    if not all(np.isfinite(frame).all() for frame in frames):  # a frame at a time: the stack may be memory-mapped
-        raise ValueError(f"{name} contain NaN or infinite values")
+    if len(frames) == 0:
+        raise ValueError(f"{name} hold no frame")
     return frames
 
 
@@ -39,28 +55,313 @@ def _frame_rate(cfg, film: FrameAxis) -> float:
     return fps
 
 
-def _annotated_video(
-    display: np.ndarray, film: FrameAxis, cfg, caption: str, metres_per_pixel: float | None
-) -> np.ndarray:
-    out = []
-    factor = max(1, int(np.ceil(cfg.video_min_height / display.shape[1])))
-    bar_px = None
-    bar_label = None
-    if cfg.scale_bar_m and metres_per_pixel:
-        bar_px = cfg.scale_bar_m / metres_per_pixel * factor
-        bar_label = f"{cfg.scale_bar_m:g} m"
-    for k, frame in enumerate(display):
-        big = upscale(frame, cfg.video_min_height)
-        out.append(
-            annotate(
-                big,
-                [format_time(film.centre(k) - film.start_opl, cfg.time_unit), caption],
-                cfg.title,
-                bar_px,
-                bar_label,
-            )
+def clip_stride(frame_count: int) -> int:
+    """Every how many frames the clip's exposure looks: at most ``CLIP_EXPOSURE_FRAMES`` evenly spaced."""
+    return max(1, int(np.ceil(frame_count / CLIP_EXPOSURE_FRAMES)))
+
+
+@dataclass
+class FilmStatistics:
+    """What the first pass over a film measures, a frame at a time."""
+
+    clip: LuminanceHistogram  # every clip_stride-th frame: the clip's exposure (videos, EXR headers)
+    every_frame: LuminanceHistogram  # all frames: the streak images' exposure
+    total: np.ndarray  # (H, W, 3) float64, the sum of the frames: the cumulative video's last frame
+    total_luminance: np.ndarray  # (H, W), the frames' luminance summed: the time-of-arrival map's 100 %
+
+    @classmethod
+    def measure(cls, frames: np.ndarray, name: str = "frames", to_bins: FrameAxis | None = None) -> FilmStatistics:
+        """Measure ``frames`` (converted window by window with ``to_bins.as_bins`` when given); refuses NaN
+        or infinite values."""
+        frames = check_frames(frames, name)
+        stride = clip_stride(len(frames))
+        statistics = cls(
+            LuminanceHistogram(), LuminanceHistogram(), np.zeros(frames.shape[1:]), np.zeros(frames.shape[1:3])
         )
-    return np.stack(out)
+        for first, window in frame_windows(frames):
+            if not np.isfinite(window).all():
+                raise ValueError(f"{name} contain NaN or infinite values (frames {first}–{first + len(window) - 1})")
+            if to_bins is not None:
+                window = to_bins.as_bins(window)
+            for k, frame in enumerate(window, start=first):
+                lum = luminance(frame)
+                histogram = LuminanceHistogram()
+                histogram.add_luminance(lum)
+                statistics.every_frame += histogram
+                if k % stride == 0:
+                    statistics.clip += histogram
+                statistics.total += frame
+                statistics.total_luminance += lum
+        return statistics
+
+    def clip_exposure(self, cfg) -> float:
+        """One exposure for the clip (``composite.exposure_percentile`` of the sampled frames)."""
+        return self.clip.exposure(cfg.exposure_percentile)
+
+
+def clip_exposure(frames: np.ndarray, cfg) -> float:
+    """The clip's exposure of a stack (a pass over it; ``FilmStatistics`` when the pass measures more)."""
+    return FilmStatistics.measure(frames).clip_exposure(cfg)
+
+
+class _Frame:
+    """Frame ``k`` of a pass, with what several outputs share computed once."""
+
+    def __init__(self, k: int, frame: np.ndarray, clip_scale: float, curve) -> None:
+        self.k, self.frame, self.clip_scale, self.curve = k, frame, clip_scale, curve
+
+    @cached_property
+    def clip_display(self) -> np.ndarray:
+        """Display values in [0, 1] at the clip's exposure (float64, (H, W, 3))."""
+        return display_values(self.frame, self.clip_scale, self.curve)
+
+    @cached_property
+    def luminance(self) -> np.ndarray:
+        return luminance(self.frame)
+
+
+class _Labels:
+    """The burned-in labels of a clip's frames: time, caption, title and scale bar (upscaled frames)."""
+
+    def __init__(self, film: FrameAxis, cfg, height: int, metres_per_pixel: float | None) -> None:
+        self.film, self.cfg = film, cfg
+        factor = max(1, int(np.ceil(cfg.video_min_height / height)))
+        self.bar_px = cfg.scale_bar_m / metres_per_pixel * factor if cfg.scale_bar_m and metres_per_pixel else None
+        self.bar_label = f"{cfg.scale_bar_m:g} m" if self.bar_px is not None else None
+
+    def time(self, k: int) -> str:
+        return format_time(self.film.centre(k) - self.film.start_opl, self.cfg.time_unit)
+
+    def video_frame(self, k: int, display: np.ndarray, caption: str) -> np.ndarray:
+        big = upscale(display, self.cfg.video_min_height)
+        return annotate(big, [self.time(k), caption], self.cfg.title, self.bar_px, self.bar_label)
+
+
+class _TransientVideos:
+    """``<stem>.mp4`` (frame by frame), ``<stem>_10bit.mp4`` (``archival_cut``) and ``<stem>_cumulative.mp4``
+    (the running sum; its last frame is the windowed steady image)."""
+
+    def __init__(self, files: ExitStack, out_dir: Path, stem: str, fps: float, labels: _Labels, cfg, cumulative_scale):
+        self.cfg, self.labels, self.cumulative_scale = cfg, labels, cumulative_scale
+        self.paths = {"video": out_dir / f"{stem}.mp4", "cumulative_video": out_dir / f"{stem}_cumulative.mp4"}
+        if cfg.archival_cut:
+            self.paths["archival_video"] = out_dir / f"{stem}_10bit.mp4"
+        self.video = files.enter_context(Mp4Writer(self.paths["video"], fps))
+        self.cumulative = files.enter_context(Mp4Writer(self.paths["cumulative_video"], fps))
+        self.archival = (
+            files.enter_context(Mp4Writer(self.paths["archival_video"], fps, cut="archival"))
+            if (cfg.archival_cut)
+            else None
+        )
+        self.caption = "per-frame exposure" if cfg.per_frame_exposure else "one exposure for the clip"
+        self.running: np.ndarray | None = None
+
+    def add(self, view: _Frame) -> None:
+        cfg, k = self.cfg, view.k
+        if cfg.per_frame_exposure:
+            display = to_display(view.frame, exposure_scale(view.frame, cfg.exposure_percentile), cfg.tone_curve)
+        else:
+            display = np.round(view.clip_display * 255).astype(np.uint8)
+        self.video.write(self.labels.video_frame(k, display, self.caption))
+        if self.archival is not None:
+            self.archival.write(self._archival_frame(view))
+        if self.running is None:
+            self.running = np.zeros(view.frame.shape)
+        self.running += view.frame
+        cumulative = to_display(self.running, self.cumulative_scale, cfg.tone_curve)
+        self.cumulative.write(self.labels.video_frame(k, cumulative, "cumulative"))
+
+    def _archival_frame(self, view: _Frame) -> np.ndarray:
+        """The 10-bit cut: the web cut's exposure and curve, quantised to 16 bits before the encoder's 10,
+        with the time label burned in (render/output/LOOK.md)."""
+        cfg = self.cfg
+        if view.frame.shape[0] >= cfg.video_min_height:  # not upscaled: the values the other outputs use
+            display = np.round(view.clip_display * 65535).astype(np.uint16)
+        else:
+            display = to_display(upscale(view.frame, cfg.video_min_height), view.clip_scale, cfg.tone_curve, bits=16)
+        label = annotate(np.zeros((*display.shape[:2], 3), np.uint8), [self.labels.time(view.k)])
+        text = label.any(axis=-1)  # the label's box and glyphs, drawn over the 16-bit frame
+        display[text] = label[text].astype(np.uint16) * 257
+        return display
+
+    def finish(self) -> dict[str, Path]:
+        return dict(self.paths)
+
+
+class _Streaks:
+    """``streak_x.png`` / ``streak_y.png``: the x–t slice at ``streak_row`` and the y–t slice at
+    ``streak_column`` (the middle by default), at the exposure of all the frames."""
+
+    def __init__(self, shape: tuple[int, ...], film: FrameAxis, cfg, out_dir: Path, stem: str, scale: float) -> None:
+        count, height, width = shape[:3]
+        self.row = height // 2 if cfg.streak_row is None else cfg.streak_row
+        self.column = width // 2 if cfg.streak_column is None else cfg.streak_column
+        if self.row >= height:
+            raise ValueError(f"composite.streak_row={self.row} is outside the image of height {height}")
+        if self.column >= width:
+            raise ValueError(f"composite.streak_column={self.column} is outside the image of width {width}")
+        self.film, self.cfg, self.out_dir, self.stem, self.scale = film, cfg, out_dir, stem, scale
+        self.x_slab = np.empty((count, width, 3), np.float32)
+        self.y_slab = np.empty((count, height, 3), np.float32)
+
+    def add(self, view: _Frame) -> None:
+        self.x_slab[view.k] = view.frame[self.row]
+        self.y_slab[view.k] = view.frame[:, self.column]
+
+    def finish(self) -> dict[str, Path]:
+        paths = {"streak_x": self.out_dir / f"{self.stem}_x.png", "streak_y": self.out_dir / f"{self.stem}_y.png"}
+        film, cfg = self.film, self.cfg
+        for axis, index, slab, key in (
+            ("x", self.row, self.x_slab, "streak_x"),
+            ("y", self.column, self.y_slab, "streak_y"),
+        ):
+            streak_image(
+                slab,
+                axis,
+                index,
+                film.start_opl,
+                film.bin_width_opl,
+                self.scale,
+                paths[key],
+                cfg.tone_curve,
+                cfg.time_unit,
+            )
+        return paths
+
+
+class _LightInFlight:
+    """Each frame's light over the dimmed steady image, as in femto-photography videos: the steady image at
+    ``light_in_flight_dim`` of its brightness, the frame's light screened over it with the clip's exposure.
+    Writes light_in_flight.mp4, a 2 x 2 panel of four moments (the size of the still; larger for small
+    renders), still.png (the steady image at full size, unlabelled) and the time-of-arrival map."""
+
+    def __init__(
+        self,
+        files: ExitStack,
+        steady: np.ndarray,
+        statistics: FilmStatistics,
+        count: int,
+        film: FrameAxis,
+        cfg,
+        out_dir: Path,
+        fps: float,
+        labels: _Labels,
+    ) -> None:
+        self.cfg, self.out_dir, self.labels = cfg, out_dir, labels
+        self.steady_display = display_values(steady, exposure_scale(steady, cfg.exposure_percentile), cfg.tone_curve)
+        self.background = self.steady_display * cfg.light_in_flight_dim
+        self.video_path = out_dir / "light_in_flight.mp4"
+        self.video = files.enter_context(Mp4Writer(self.video_path, fps))
+        self.moments = [int(k) for k in np.linspace(0, count - 1, 4).round().astype(int)]
+        self.tiles: dict[int, np.ndarray] = {}
+        self.arrival = ArrivalTimes(statistics.total_luminance, film.bin_width_opl)
+
+    def add(self, view: _Frame) -> None:
+        screened = 1 - (1 - self.background) * (1 - view.clip_display)
+        composed = np.round(screened * 255).astype(np.uint8)
+        self.video.write(self.labels.video_frame(view.k, composed, "light in flight"))
+        if view.k in self.moments:
+            self.tiles[view.k] = annotate(self._tile(screened), [self.labels.time(view.k)])
+        self.arrival.add(view.k, view.luminance)
+
+    @staticmethod
+    def _tile(image: np.ndarray) -> np.ndarray:
+        """A 2 x 2 box average, so that four moments make a panel of the still's size; below 480 rows the
+        frame at full size, enlarged to at least 240 rows, so that the panel and its labels stay legible."""
+        if image.shape[0] < 480:
+            return upscale(np.round(image * 255).astype(np.uint8), 240)
+        height, width = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
+        blocks = image[:height, :width].reshape(height // 2, 2, width // 2, 2, 3)
+        return np.round(blocks.mean(axis=(1, 3)) * 255).astype(np.uint8)
+
+    def finish(self) -> dict[str, Path]:
+        from render.output.figures import time_of_arrival_map
+
+        tiles = [self.tiles[k] for k in self.moments]
+        panel = np.concatenate([np.concatenate(tiles[:2], axis=1), np.concatenate(tiles[2:], axis=1)], axis=0)
+        paths = {
+            "light_in_flight": self.video_path,
+            "light_in_flight_panel": self.out_dir / "light_in_flight_panel.png",
+        }
+        with atomic_path(paths["light_in_flight_panel"]) as tmp:
+            Image.fromarray(panel).save(tmp)
+        # The still at the render's full size, without labels: the poster's main image.
+        paths["still"] = self.out_dir / "still.png"
+        with atomic_path(paths["still"]) as tmp:
+            Image.fromarray(np.round(self.steady_display * 255).astype(np.uint8)).save(tmp)
+        paths["time_of_arrival"] = self.out_dir / "time_of_arrival.png"
+        time_of_arrival_map(self.arrival, paths["time_of_arrival"], "Time of arrival")
+        return paths
+
+
+class _ExrFrames:
+    """``exr/frame_NNNN.exr``: the linear frames with render.output.exr's headers, written as they stream."""
+
+    def __init__(self, folder: Path, film: FrameAxis, attributes: dict) -> None:
+        self.folder, self.film, self.attributes = folder, film, attributes
+
+    def add(self, view: _Frame) -> None:
+        from render.output.exr import exr_frame_header, exr_frame_path, write_exr
+
+        write_exr(
+            exr_frame_path(self.folder, view.k),
+            view.frame,
+            attributes=exr_frame_header(self.film, view.k, self.attributes),
+        )
+
+    def finish(self) -> dict[str, Path]:
+        return {"exr_frames": self.folder}
+
+
+def composite_film(
+    frames: np.ndarray,
+    film: FrameAxis,
+    cfg,
+    out_dir: Path,
+    *,
+    stem: str = "transient",
+    videos: bool = True,
+    streaks: bool = False,
+    steady: np.ndarray | None = None,
+    exr_attributes: dict | None = None,
+    metres_per_pixel: float | None = None,
+) -> tuple[dict[str, Path], dict[str, float]]:
+    """Composite a (T, H, W, 3) stack (in memory or memory-mapped) in two passes over it: the videos
+    (``videos``), the streak images (``streaks``), light in flight (given the ``steady`` image) and the EXR
+    frames (given their header's ``exr_attributes``: the clip exposure is added). Returns the paths written
+    and the exposures used (clip, cumulative, streak, steady)."""
+    statistics = FilmStatistics.measure(frames)
+    fps = _frame_rate(cfg, film)
+    count, height = frames.shape[0], frames.shape[1]
+    exposures = {"clip": statistics.clip_exposure(cfg)}
+    if videos:
+        exposures["cumulative"] = exposure_scale(statistics.total, cfg.exposure_percentile)
+    if streaks:
+        exposures["streak"] = statistics.every_frame.exposure(cfg.exposure_percentile)
+    if steady is not None:
+        exposures["steady"] = exposure_scale(steady, cfg.exposure_percentile)
+    labels = _Labels(film, cfg, height, metres_per_pixel)
+    with ExitStack() as files:  # an error leaves no half-written video behind
+        outputs: list = []
+        if videos:
+            outputs.append(_TransientVideos(files, out_dir, stem, fps, labels, cfg, exposures["cumulative"]))
+        if streaks:
+            outputs.append(_Streaks(frames.shape, film, cfg, out_dir, stem="streak", scale=exposures["streak"]))
+        if steady is not None:
+            outputs.append(_LightInFlight(files, steady, statistics, count, film, cfg, out_dir, fps, labels))
+        if exr_attributes is not None:
+            outputs.append(
+                _ExrFrames(out_dir / "exr", film, {"penitentes:exposure": exposures["clip"], **exr_attributes})
+            )
+        for first, window in frame_windows(frames):
+            for k, frame in enumerate(window, start=first):
+                view = _Frame(k, frame, exposures["clip"], cfg.tone_curve)
+                for output in outputs:
+                    output.add(view)
+        written: dict[str, Path] = {}
+        for output in outputs:
+            written.update(output.finish())
+    return written, exposures
 
 
 def transient_videos(
@@ -71,129 +372,21 @@ def transient_videos(
     stem: str = "transient",
     metres_per_pixel: float | None = None,
 ) -> dict[str, Path]:
-    """Write ``<stem>.mp4`` (frame by frame) and ``<stem>_cumulative.mp4`` (running sum)."""
-    frames = check_frames(frames)
-    fps = _frame_rate(cfg, film)
-    if cfg.per_frame_exposure:
-        display, _ = display_frames(frames, cfg.tone_curve, cfg.exposure_percentile, per_frame=True)
-    else:  # frame by frame: the stack may be a memory-mapped film larger than memory allows in float64
-        scale = clip_exposure(frames, cfg)
-        display = np.stack([to_display(frame, scale, cfg.tone_curve) for frame in frames])
-    exposure = "per-frame exposure" if cfg.per_frame_exposure else "one exposure for the clip"
-    video = _annotated_video(display, film, cfg, exposure, metres_per_pixel)
-    paths = {"video": write_mp4(out_dir / f"{stem}.mp4", video, fps)}
-    if getattr(cfg, "archival_cut", False):
-        paths["archival_video"] = archival_cut(frames, film, cfg, out_dir / f"{stem}_10bit.mp4", fps)
-    # Light filling the scene: the running sum; its last frame is the (windowed) steady image.
-    total = np.zeros(frames.shape[1:], np.float64)
-    for frame in frames:
-        total += frame
-    scale = exposure_scale(total, cfg.exposure_percentile)
-    running = np.zeros_like(total)
-    display_cum = np.empty_like(display)
-    for k, frame in enumerate(frames):
-        running += frame
-        display_cum[k] = to_display(running, scale, cfg.tone_curve)
-    video_cum = _annotated_video(display_cum, film, cfg, "cumulative", metres_per_pixel)
-    paths["cumulative_video"] = write_mp4(out_dir / f"{stem}_cumulative.mp4", video_cum, fps)
-    return paths
+    """Write ``<stem>.mp4`` (frame by frame), ``<stem>_cumulative.mp4`` (running sum) and, with
+    ``archival_cut``, ``<stem>_10bit.mp4``."""
+    return composite_film(frames, film, cfg, out_dir, stem=stem, metres_per_pixel=metres_per_pixel)[0]
 
 
-def clip_exposure(frames: np.ndarray, cfg, max_frames: int = 64) -> float:
-    """One exposure for the clip; a long stack is sampled at most ``max_frames`` evenly spaced frames."""
-    stride = max(1, int(np.ceil(len(frames) / max_frames)))
-    return exposure_scale(np.asarray(frames[::stride]), cfg.exposure_percentile)
-
-
-def archival_cut(frames: np.ndarray, film: FrameAxis, cfg, path: Path, fps: float) -> Path:
-    """The 10-bit cut: the same exposure and curve as the web cut, quantised to 16 bits before the
-    encoder's 10, with the time label burned in (render/output/LOOK.md)."""
-    scale = clip_exposure(frames, cfg)
-    out = []
-    for k, frame in enumerate(frames):
-        display = to_display(upscale(np.asarray(frame), cfg.video_min_height), scale, cfg.tone_curve, bits=16)
-        label = annotate(
-            np.zeros((*display.shape[:2], 3), np.uint8), [format_time(film.centre(k) - film.start_opl, cfg.time_unit)]
-        )
-        text = label.any(axis=-1)  # the label's box and glyphs, drawn over the 16-bit frame
-        display[text] = label[text].astype(np.uint16) * 257
-        out.append(display)
-    return write_mp4(path, np.stack(out), fps, cut="archival")
+def streak_images(frames: np.ndarray, film: FrameAxis, cfg, out_dir: Path) -> dict[str, Path]:
+    """Write ``streak_x.png`` and ``streak_y.png``."""
+    return composite_film(frames, film, cfg, out_dir, videos=False, streaks=True)[0]
 
 
 def light_in_flight(
     frames: np.ndarray, steady: np.ndarray, film: FrameAxis, cfg, out_dir: Path, metres_per_pixel: float | None = None
 ) -> dict[str, Path]:
-    """Each frame's light over the dimmed steady image, as in femto-photography videos: the steady image at
-    ``light_in_flight_dim`` of its brightness, the frame's light screened over it with the clip's exposure.
-    Writes light_in_flight.mp4, a 2 x 2 panel of four moments (the size of the still; larger for small
-    renders), still.png (the steady
-    image at full size, unlabelled) and the time-of-arrival map."""
-    from render.output.figures import time_of_arrival_map
-
-    scale = clip_exposure(frames, cfg)
-    background = display_values(steady, exposure_scale(steady, cfg.exposure_percentile), cfg.tone_curve)
-    background = background * cfg.light_in_flight_dim
-
-    def screened(k: int) -> np.ndarray:
-        return 1 - (1 - background) * (1 - display_values(frames[k], scale, cfg.tone_curve))
-
-    def composed(k: int) -> np.ndarray:
-        return np.round(screened(k) * 255).astype(np.uint8)
-
-    def tile(k: int) -> np.ndarray:
-        """A 2 x 2 box average, so that four moments make a panel of the still's size; below 480 rows the
-        frame at full size, enlarged to at least 240 rows, so that the panel and its labels stay legible."""
-        image = screened(k)
-        if image.shape[0] < 480:
-            return upscale(np.round(image * 255).astype(np.uint8), 240)
-        height, width = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
-        blocks = image[:height, :width].reshape(height // 2, 2, width // 2, 2, 3)
-        return np.round(blocks.mean(axis=(1, 3)) * 255).astype(np.uint8)
-
-    fps = _frame_rate(cfg, film)
-    video = _annotated_video(
-        np.stack([composed(k) for k in range(len(frames))]), film, cfg, "light in flight", metres_per_pixel
-    )
-    paths = {"light_in_flight": write_mp4(out_dir / "light_in_flight.mp4", video, fps)}
-    moments = np.linspace(0, len(frames) - 1, 4).round().astype(int)
-    tiles = [
-        annotate(tile(int(k)), [format_time(film.centre(int(k)) - film.start_opl, cfg.time_unit)]) for k in moments
-    ]
-    panel = np.concatenate([np.concatenate(tiles[:2], axis=1), np.concatenate(tiles[2:], axis=1)], axis=0)
-    panel_path = out_dir / "light_in_flight_panel.png"
-    with atomic_path(panel_path) as tmp:
-        Image.fromarray(panel).save(tmp)
-    paths["light_in_flight_panel"] = panel_path
-    # The still at the render's full size, without labels: the poster's main image.
-    still_path = out_dir / "still.png"
-    with atomic_path(still_path) as tmp:
-        steady_display = display_values(steady, exposure_scale(steady, cfg.exposure_percentile), cfg.tone_curve)
-        Image.fromarray(np.round(steady_display * 255).astype(np.uint8)).save(tmp)
-    paths["still"] = still_path
-    toa = out_dir / "time_of_arrival.png"
-    time_of_arrival_map(frames, film.start_opl, film.bin_width_opl, toa, "Time of arrival")
-    paths["time_of_arrival"] = toa
-    return paths
-
-
-def streak_images(frames: np.ndarray, film: FrameAxis, cfg, out_dir: Path, stem: str = "streak") -> dict[str, Path]:
-    frames = check_frames(frames)
-    height, width = frames.shape[1:3]
-    row = height // 2 if cfg.streak_row is None else cfg.streak_row
-    column = width // 2 if cfg.streak_column is None else cfg.streak_column
-    if row >= height:
-        raise ValueError(f"composite.streak_row={row} is outside the image of height {height}")
-    if column >= width:
-        raise ValueError(f"composite.streak_column={column} is outside the image of width {width}")
-    scale = exposure_scale(frames, cfg.exposure_percentile)
-    x_path = out_dir / f"{stem}_x.png"
-    y_path = out_dir / f"{stem}_y.png"
-    for axis, index, path in (("x", row, x_path), ("y", column, y_path)):
-        streak_image(
-            frames, axis, index, film.start_opl, film.bin_width_opl, scale, path, cfg.tone_curve, cfg.time_unit
-        )
-    return {"streak_x": x_path, "streak_y": y_path}
+    """Write light_in_flight.mp4, light_in_flight_panel.png, still.png and time_of_arrival.png."""
+    return composite_film(frames, film, cfg, out_dir, videos=False, steady=steady, metres_per_pixel=metres_per_pixel)[0]
 
 
 def side_by_side(
@@ -204,56 +397,67 @@ def side_by_side(
     cfg,
     out_dir: Path,
     stem: str = "side_by_side",
+    a_film: FrameAxis | None = None,
 ) -> dict[str, Path]:
-    """Video and still of two frame stacks with a relative-difference heat-map panel."""
+    """Video and still of two frame stacks with a relative-difference heat-map panel, streamed a window at a
+    time; ``a_film`` converts ``a`` to bins window by window (our gate frames against mitransient's bins)."""
     import matplotlib
 
     a_frames = check_frames(a_frames, labels[0])
     b_frames = check_frames(b_frames, labels[1])
     if a_frames.shape != b_frames.shape:
         raise ValueError(f"cannot compare {labels[0]} {a_frames.shape} with {labels[1]} {b_frames.shape}")
+    a_stats = FilmStatistics.measure(a_frames, labels[0], to_bins=a_film)
+    b_stats = FilmStatistics.measure(b_frames, labels[1])
     # One exposure for both, from both: from the reference alone a black one (Mitsuba's delta sun behind a
     # dielectric) would blow ours out to white.
-    scale = exposure_scale(np.concatenate([a_frames, b_frames]), cfg.exposure_percentile)
+    both = LuminanceHistogram()
+    both += a_stats.every_frame
+    both += b_stats.every_frame
+    scale = both.exposure(cfg.exposure_percentile)
+    floor = 0.01 * float(b_stats.total.mean()) / len(b_frames) + 1e-12  # 1 % of the reference's mean
     colormap = matplotlib.colormaps["inferno"]
-    panels = []
-    for k in range(len(a_frames)):
-        a = to_display(a_frames[k], scale, cfg.tone_curve)
-        b = to_display(b_frames[k], scale, cfg.tone_curve)
-        diff = relative_difference(a_frames[k], b_frames[k], floor=0.01 * float(np.mean(b_frames)) + 1e-12)
-        heat = (colormap(np.clip(diff / cfg.difference_vmax, 0, 1))[..., :3] * 255).astype(np.uint8)
-        row = np.concatenate([upscale(p, cfg.video_min_height // 2) for p in (a, b, heat)], axis=1)
-        panels.append(
-            annotate(
-                row,
-                [
-                    f"{labels[0]} | {labels[1]} | rel. diff 0 to {cfg.difference_vmax:g}",
-                    format_time(film.centre(k) - film.start_opl, cfg.time_unit),
-                ],
-            )
-        )
-    paths = {"side_by_side_video": write_mp4(out_dir / f"{stem}.mp4", np.stack(panels), _frame_rate(cfg, film))}
+    text = _Labels(film, cfg, a_frames.shape[1], None)
+    convert: Callable[[np.ndarray], np.ndarray] = a_film.as_bins if a_film is not None else (lambda window: window)
+    path = out_dir / f"{stem}.mp4"
+    with Mp4Writer(path, _frame_rate(cfg, film)) as video:
+        for (first, a_window), (_, b_window) in zip(frame_windows(a_frames), frame_windows(b_frames)):
+            for k, (a_frame, b_frame) in enumerate(zip(convert(a_window), b_window), start=first):
+                a = to_display(a_frame, scale, cfg.tone_curve)
+                b = to_display(b_frame, scale, cfg.tone_curve)
+                diff = relative_difference(a_frame, b_frame, floor=floor)
+                heat = (colormap(np.clip(diff / cfg.difference_vmax, 0, 1))[..., :3] * 255).astype(np.uint8)
+                row = np.concatenate([upscale(p, cfg.video_min_height // 2) for p in (a, b, heat)], axis=1)
+                caption = f"{labels[0]} | {labels[1]} | rel. diff 0 to {cfg.difference_vmax:g}"
+                video.write(annotate(row, [caption, text.time(k)]))
     still = out_dir / f"{stem}.png"
     side_by_side_still(
-        a_frames.sum(axis=0),
-        b_frames.sum(axis=0),
+        a_stats.total,
+        b_stats.total,
         labels,
-        exposure_scale(np.concatenate([a_frames.sum(axis=0), b_frames.sum(axis=0)]), cfg.exposure_percentile),
+        exposure_scale(np.stack([a_stats.total, b_stats.total]), cfg.exposure_percentile),
         still,
         cfg.tone_curve,
         title="Sum over all frames",
         vmax=cfg.difference_vmax,
     )
-    paths["side_by_side_still"] = still
-    return paths
+    return {"side_by_side_video": path, "side_by_side_still": still}
 
 
 def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path) -> dict:
     """The `composite` stage: videos and streak images of our frames, and ours against the reference.
 
-    Reads ``render_dir/frames.npy`` and ``stats.json`` (the film), ``reference_dir/frames.npy`` when a
-    transient reference exists, and the camera from ``scene_dir/scene.json`` for the scale bar.
+    Reads ``render_dir/frames.npy`` (memory-mapped, a window at a time) and ``stats.json`` (the film),
+    ``reference_dir/frames.npy`` when a transient reference exists, and the camera from
+    ``scene_dir/scene.json`` for the scale bar. The summary carries the exposures and the stage's own peak
+    memory (pipeline/memory.py).
     """
+    with PeakMemory() as memory:
+        summary = _composite(render_dir, reference_dir, scene_dir, cfg, out_dir)
+    return {**summary, **memory.record()}
+
+
+def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path) -> dict:
     from render.scene.model import Scene, pixel_footprint
 
     ours = RenderOutputs.read(render_dir)
@@ -267,26 +471,28 @@ def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir:
     frames = ours.frames(memory_mapped=True)
     if frames is None:
         raise FileNotFoundError(f"{render_dir}: frames.npy is missing; run the render stage again (--force)")
-    written = transient_videos(frames, film, cfg, out_dir, metres_per_pixel=metres_per_pixel)
-    written.update(streak_images(frames, film, cfg, out_dir))
-    steady = ours.steady()
-    if cfg.light_in_flight and steady is not None:
-        written.update(light_in_flight(frames, steady, film, cfg, out_dir, metres_per_pixel))
+    steady = ours.steady() if cfg.light_in_flight else None
+    exr_attributes = None
     if cfg.exr_frames:
-        from render.output.exr import write_exr_frames
-
         manifest = render_dir / "manifest.json"
         config_hash = json.loads(manifest.read_text())["config_hash"] if manifest.is_file() else "unknown"
-        exposure = clip_exposure(frames, cfg)
-        attributes = {"penitentes:exposure": exposure, "penitentes:config_hash": config_hash}
-        written["exr_frames"] = write_exr_frames(out_dir / "exr", frames, film, attributes)[0].parent
-    reference_frames = RenderOutputs.read(reference_dir).frames() if reference_dir is not None else None
+        exr_attributes = {"penitentes:config_hash": config_hash}
+    written, exposures = composite_film(
+        frames,
+        film,
+        cfg,
+        out_dir,
+        streaks=True,
+        steady=steady,
+        exr_attributes=exr_attributes,
+        metres_per_pixel=metres_per_pixel,
+    )
+    reference_frames = RenderOutputs.read(reference_dir).frames(memory_mapped=True) if reference_dir else None
     if reference_frames is not None and reference_frames.shape == frames.shape:
         # mitransient's frames are bin integrals; gate frames are densities per metre (render/core/DESIGN.md §2).
-        ours_as_bins = film.as_bins(frames)
         bins_film = film.in_bins()
         written.update(
-            side_by_side(ours_as_bins, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg, out_dir)
+            side_by_side(frames, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg, out_dir, a_film=film)
         )
         written.update(
             transient_videos(
@@ -299,4 +505,5 @@ def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir:
         "files": sorted(p.name for p in written.values()),
         "frames": int(frames.shape[0]),
         "frame_mode": film.frame_mode,
+        "exposures": exposures,
     }

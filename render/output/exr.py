@@ -11,6 +11,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from pipeline.atomic import atomic_path
+from render.output.files import frame_windows
 
 
 def write_exr(
@@ -48,27 +49,39 @@ def write_exr(
     return Path(path)
 
 
+def exr_frame_path(folder: str | os.PathLike[str], k: int) -> Path:
+    return Path(folder) / f"frame_{k:04d}.exr"
+
+
+def exr_frame_header(
+    axis: Any, k: int, attributes: Mapping[str, str | float | int] | None = None
+) -> dict[str, str | float | int]:
+    """The header of frame ``k``: its OPL, its time in ns since first light, the bin width, the frame mode
+    and unit (``axis``: a render.output.files FrameAxis) and ``attributes`` (e.g. the clip exposure and
+    the render's config hash)."""
+    described = axis.describe(k + 1)
+    return {
+        "penitentes:opl_m": described["frame_centres_opl_m"][k],
+        "penitentes:time_ns_since_first_light": described["frame_centres_ns_since_first_light"][k],
+        "penitentes:bin_width_opl_m": axis.bin_width_opl,
+        "penitentes:frame_mode": axis.frame_mode,
+        "penitentes:unit": described["unit"],
+        **(attributes or {}),
+    }
+
+
 def write_exr_frames(
     folder: str | os.PathLike[str],
     frames: np.ndarray,
     axis: Any,
     attributes: Mapping[str, str | float | int] | None = None,
 ) -> list[Path]:
-    """Write a (T, H, W, 3) stack as ``folder/frame_NNNN.exr``, each header with the frame's OPL, its time
-    in ns since first light, the bin width, the frame mode and unit (``axis``: a render.output.files
-    FrameAxis) and ``attributes`` (e.g. the clip exposure and the render's config hash)."""
-    described = axis.describe(len(frames))
+    """Write a (T, H, W, 3) stack as ``folder/frame_NNNN.exr``, a window of frames at a time (the stack may
+    be memory-mapped), each with ``exr_frame_header``."""
     paths = []
-    for k in range(len(frames)):
-        metadata = {
-            "penitentes:opl_m": described["frame_centres_opl_m"][k],
-            "penitentes:time_ns_since_first_light": described["frame_centres_ns_since_first_light"][k],
-            "penitentes:bin_width_opl_m": axis.bin_width_opl,
-            "penitentes:frame_mode": axis.frame_mode,
-            "penitentes:unit": described["unit"],
-            **(attributes or {}),
-        }
-        paths.append(write_exr(Path(folder) / f"frame_{k:04d}.exr", frames[k], attributes=metadata))
+    for first, window in frame_windows(frames):
+        for k, frame in enumerate(window, start=first):
+            paths.append(write_exr(exr_frame_path(folder, k), frame, attributes=exr_frame_header(axis, k, attributes)))
     return paths
 
 
@@ -87,4 +100,4 @@ def read_exr(path: str | os.PathLike[str]) -> np.ndarray:
     return pixels if pixels.ndim == 3 else pixels[..., None]
 
 
-__all__ = ["write_exr", "read_exr"]
+__all__ = ["exr_frame_header", "exr_frame_path", "read_exr", "write_exr", "write_exr_frames"]

@@ -31,7 +31,7 @@ def _save(fig, path: Path, pdf: bool = False) -> list[Path]:
 
 
 def streak_image(
-    frames: np.ndarray,
+    slab: np.ndarray,
     axis: str,
     index: int,
     start_opl: float,
@@ -41,20 +41,14 @@ def streak_image(
     curve: ToneCurve = "reinhard",
     time_unit: str = "ps",
 ) -> list[Path]:
-    """An x–t slice (axis='x', at image row ``index``) or y–t slice (axis='y', at column ``index``); time
-    counts in ``time_unit`` (ps or ns) from the opening of the film window at ``start_opl``, the first light."""
-    frames = np.asarray(frames)
-    t_count, height, width = frames.shape[:3]
-    if axis == "x":
-        if not 0 <= index < height:
-            raise ValueError(f"streak row {index} is outside the image (0..{height - 1})")
-        slab, extent_space, label = frames[:, index, :, :], width, f"x (pixel), row {index}"
-    elif axis == "y":
-        if not 0 <= index < width:
-            raise ValueError(f"streak column {index} is outside the image (0..{width - 1})")
-        slab, extent_space, label = frames[:, :, index, :], height, f"y (pixel), column {index}"
-    else:
+    """An x–t slice (axis='x': ``slab`` is image row ``index`` of every frame, (T, W, 3)) or y–t slice
+    (axis='y': column ``index``, (T, H, 3)); time counts in ``time_unit`` (ps or ns) from the opening of
+    the film window at ``start_opl``, the first light."""
+    slab = np.asarray(slab)
+    if axis not in ("x", "y"):
         raise ValueError(f"streak axis must be 'x' or 'y', got {axis!r}")
+    label = f"x (pixel), row {index}" if axis == "x" else f"y (pixel), column {index}"
+    t_count, extent_space = slab.shape[:2]
     per_unit = PS_PER_M_OPL / (1000.0 if time_unit == "ns" else 1.0)
     t_end = t_count * bin_width_opl * per_unit
     fig, ax = plt.subplots(figsize=(6, 4.5))
@@ -190,29 +184,33 @@ def arrival_map(first_arrival_opl: np.ndarray, path: Path, title: str) -> list[P
     return _save(fig, path)
 
 
-def time_of_arrival_map(
-    frames: np.ndarray, start_opl: float, bin_width_opl: float, path: Path, title: str, fraction: float = 0.05
-) -> list[Path]:
+class ArrivalTimes:
     """Per pixel, the time since first light at which its luminance, summed over the frames, first reaches
-    ``fraction`` of its total, in ns, in a perceptual colour map (viridis); pixels without light are blank.
-    A fraction rather than the first non-zero frame keeps one stray early photon from setting the time."""
-    from pipeline.units import NS_PER_M_OPL
+    ``fraction`` of its total ``total_luminance`` (H, W), in ns; NaN where no light arrives. Fed a frame's
+    luminance at a time, in order. A fraction rather than the first non-zero frame keeps one stray early
+    photon from setting the time."""
 
-    frames = np.asarray(frames)
-    running = np.zeros(frames.shape[1:3])
-    for frame in frames:  # one frame at a time: the stack may be a memory-mapped film
-        running += luminance(frame)
-    total = running
-    arrival = np.full(total.shape, np.nan)
-    running = np.zeros(total.shape)
-    for k, frame in enumerate(frames):
-        running += luminance(frame)
-        reached = np.isnan(arrival) & (total > 0) & (running >= fraction * total)
-        arrival[reached] = (k + 0.5) * bin_width_opl * NS_PER_M_OPL
-    height, width = int(frames.shape[1]), int(frames.shape[2])
+    def __init__(self, total_luminance: np.ndarray, bin_width_opl: float, fraction: float = 0.05) -> None:
+        self.total = np.asarray(total_luminance, np.float64)
+        self.bin_width_opl, self.fraction = bin_width_opl, fraction
+        self.arrival: np.ndarray = np.full(self.total.shape, np.nan)
+        self.running = np.zeros(self.total.shape)
+
+    def add(self, k: int, frame_luminance: np.ndarray) -> None:
+        from pipeline.units import NS_PER_M_OPL
+
+        self.running += frame_luminance
+        reached = np.isnan(self.arrival) & (self.total > 0) & (self.running >= self.fraction * self.total)
+        self.arrival[reached] = (k + 0.5) * self.bin_width_opl * NS_PER_M_OPL
+
+
+def time_of_arrival_map(times: ArrivalTimes, path: Path, title: str) -> list[Path]:
+    """The arrival times in a perceptual colour map (viridis); pixels without light are blank."""
+    height, width = times.arrival.shape[:2]
     fig, ax = plt.subplots(figsize=(6.5, 6.5 * height / width + 0.5))
-    shown = ax.imshow(arrival, cmap="viridis", interpolation="nearest")
-    fig.colorbar(shown, ax=ax, label=f"time of arrival ({fraction:.0%} of the light), ns since first light", shrink=0.8)
+    shown = ax.imshow(times.arrival, cmap="viridis", interpolation="nearest")
+    label = f"time of arrival ({times.fraction:.0%} of the light), ns since first light"
+    fig.colorbar(shown, ax=ax, label=label, shrink=0.8)
     ax.set_title(title, fontsize=10)
     ax.axis("off")
     return _save(fig, path)

@@ -15,6 +15,8 @@ and in nanoseconds since first light, i.e. since the window opens) and how to co
 from __future__ import annotations
 
 import json
+import mmap
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -69,6 +71,26 @@ class FrameAxis:
             "frame_centres_ns_since_first_light": [(c - self.start_opl) * NS_PER_M_OPL for c in centres],
             "to_bins": "multiply by bin_width_opl_m" if self.frame_mode == "gate" else "already bins",
         }
+
+
+WINDOW_BYTES = 64 * 2**20  # what a pass over a film holds of it at a time
+
+
+def frame_windows(frames: np.ndarray, window_bytes: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """``(first frame, frames)`` windows of a (T, ...) stack, each a copy of at most ``window_bytes``
+    (``WINDOW_BYTES`` by default; at least one frame), so that a pass over a film larger than memory holds a window at a time.
+
+    A memory-mapped stack (``RenderOutputs.frames(memory_mapped=True)``) has its pages dropped from the
+    process after each window: mapped pages count in the resident size until unmapped, and a pass over
+    the 6 GiB of a full video's film would otherwise show as 6 GiB resident (they stay in the page cache,
+    so a second pass reads them back from memory)."""
+    frame_bytes = max(1, int(np.prod(frames.shape[1:])) * frames.dtype.itemsize)
+    step = max(1, (WINDOW_BYTES if window_bytes is None else window_bytes) // frame_bytes)
+    mapping = getattr(frames, "_mmap", None)  # numpy.memmap keeps its mmap.mmap there
+    for first in range(0, len(frames), step):
+        yield first, np.array(frames[first : first + step])
+        if isinstance(mapping, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
+            mapping.madvise(mmap.MADV_DONTNEED)
 
 
 def write_frames(folder: Path, frames: np.ndarray, axis: FrameAxis, **about: Any) -> None:
@@ -156,6 +178,7 @@ class RenderOutputs:
 
 __all__ = [
     "FRAMES",
+    "WINDOW_BYTES",
     "FRAMES_DESCRIPTION",
     "FRAME_UNITS",
     "OURS_STATS",
@@ -164,5 +187,6 @@ __all__ = [
     "FrameAxis",
     "RenderOutputs",
     "describe_frames",
+    "frame_windows",
     "write_frames",
 ]

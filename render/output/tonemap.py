@@ -3,6 +3,12 @@
 The default exposure is global: one scale for every frame, chosen so that a high percentile of
 the luminance over all frames maps to ``key``. Brightness therefore evolves as the light does,
 and a frame holding more energy is never shown darker (the mapping is monotonic per pixel).
+
+The percentile comes from a histogram of log2 luminance (``LuminanceHistogram``), filled a frame at a
+time, never from a sort of every pixel: a 1080p film of 240 frames has 500 million of them. The bins
+are 1/256 of an octave wide and cover every positive float32 luminance, so the level it returns lies
+within a factor 2^(1/512) of numpy's linearly interpolated percentile: ``PERCENTILE_RELATIVE_ERROR``,
+0.14 %, and so does the exposure.
 """
 
 from __future__ import annotations
@@ -19,14 +25,72 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
     return np.asarray(rgb, dtype=np.float64) @ REC709_LUMA
 
 
+BINS_PER_OCTAVE = 256
+LOG2_LUMINANCE_RANGE = (-160, 130)  # every positive luminance of float32 RGB: 2^-149 * 0.0722 .. 2^128
+PERCENTILE_RELATIVE_ERROR = 2 ** (1 / (2 * BINS_PER_OCTAVE)) - 1  # half a bin: 0.135 %
+
+
+class LuminanceHistogram:
+    """Counts of positive luminance in bins of 1/``BINS_PER_OCTAVE`` octave, filled image by image.
+
+    ``percentile`` reads numpy's percentile (linear interpolation between the two order statistics around
+    the rank) off the counts: each order statistic is known to its bin, [lo, lo·2^w) with w one bin in
+    octaves, and the interpolation of two such intervals is again [L, L·2^w); the answer, taken at the
+    bins' geometric centres, is L·2^(w/2), within a factor 2^(w/2) of the exact value
+    (``PERCENTILE_RELATIVE_ERROR``)."""
+
+    bins = (LOG2_LUMINANCE_RANGE[1] - LOG2_LUMINANCE_RANGE[0]) * BINS_PER_OCTAVE
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(self.bins, np.int64)
+
+    @classmethod
+    def of(cls, rgb: np.ndarray) -> LuminanceHistogram:
+        """The histogram of an (..., 3) image or stack (a stack frame by frame: it may be memory-mapped)."""
+        histogram = cls()
+        rgb = np.asanyarray(rgb)
+        for image in rgb if rgb.ndim == 4 else (rgb,):
+            histogram.add_luminance(luminance(image))
+        return histogram
+
+    def add_luminance(self, lum: np.ndarray) -> None:
+        positive = lum[lum > 0]
+        if positive.size == 0:
+            return
+        index = np.floor((np.log2(positive) - LOG2_LUMINANCE_RANGE[0]) * BINS_PER_OCTAVE).astype(np.int64)
+        np.clip(index, 0, self.bins - 1, out=index)
+        self.counts += np.bincount(index, minlength=self.bins)
+
+    def __iadd__(self, other: LuminanceHistogram) -> LuminanceHistogram:
+        self.counts += other.counts
+        return self
+
+    @property
+    def total(self) -> int:
+        return int(self.counts.sum())
+
+    def percentile(self, percentile: float) -> float | None:
+        """The ``percentile`` of the counted luminances (None when nothing positive was counted)."""
+        count = self.total
+        if count == 0:
+            return None
+        rank = (count - 1) * percentile / 100.0
+        below = int(np.floor(rank))
+        cumulative = np.cumsum(self.counts)
+        low, high = np.searchsorted(cumulative, [below, min(below + 1, count - 1)], side="right")
+        centres = 2.0 ** (LOG2_LUMINANCE_RANGE[0] + (np.array([low, high]) + 0.5) / BINS_PER_OCTAVE)
+        return float(centres[0] + (rank - below) * (centres[1] - centres[0]))
+
+    def exposure(self, percentile: float = 99.5, key: float = 1.0) -> float:
+        """Scale that maps the ``percentile`` to ``key`` (1 when nothing positive was counted)."""
+        level = self.percentile(percentile)
+        return key / level if level else 1.0
+
+
 def exposure_scale(frames: np.ndarray, percentile: float = 99.5, key: float = 1.0) -> float:
-    """Scale that maps the ``percentile`` of the positive luminance values to ``key``."""
-    lum = luminance(frames)
-    positive = lum[lum > 0]
-    if positive.size == 0:
-        return 1.0
-    level = float(np.percentile(positive, percentile))
-    return key / level if level > 0 else 1.0
+    """Scale that maps the ``percentile`` of the positive luminance values to ``key`` (an image, or a stack
+    read a frame at a time; within ``PERCENTILE_RELATIVE_ERROR`` of the sorted values' percentile)."""
+    return LuminanceHistogram.of(frames).exposure(percentile, key)
 
 
 def tone_curve(x: np.ndarray, curve: ToneCurve) -> np.ndarray:

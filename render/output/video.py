@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
+from types import TracebackType
+from typing import Any
 
 import av
 import numpy as np
+from av.video.reformatter import ColorRange, Colorspace
 from PIL import Image, ImageDraw, ImageFont
 
 from pipeline.atomic import atomic_path
@@ -83,58 +88,99 @@ BT709 = 1  # the ITU-T H.273 code of BT.709 for color_primaries, color_trc and c
 RANGE_TV = 1  # AVCOL_RANGE_MPEG: limited ("tv") range
 
 
-def write_mp4(path: str | Path, frames: np.ndarray, fps: float, crf: int | None = None, cut: str = "web") -> Path:
-    """Encode (T, H, W, 3) display frames as H.264 MP4, atomically, tagged BT.709 in TV range with the index
-    up front (``+faststart``). ``cut`` "web": uint8 frames, yuv420p, CRF 18; "archival": uint16 frames
-    (display values x 65535), yuv420p10le (High 10). Odd sizes are padded by edge replication."""
-    if cut not in CUTS:
-        raise ValueError(f"unknown cut '{cut}': use {' or '.join(CUTS)}")
-    spec = CUTS[cut]
-    frames = np.asarray(frames)
-    dtype = np.uint16 if cut == "archival" else np.uint8
-    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != dtype:
-        raise ValueError(
-            f"{cut} video frames must be {np.dtype(dtype)} (T, H, W, 3), got {frames.dtype} {frames.shape}"
+class Mp4Writer:
+    """A streaming H.264 MP4 encoder: ``with Mp4Writer(path, fps) as video: video.write(frame)`` for each
+    (H, W, 3) display frame, as it is made. Encoded atomically (the file appears on a clean exit only),
+    tagged BT.709 in TV range with the index up front (``+faststart``). ``cut`` "web": uint8 frames,
+    yuv420p, CRF 18; "archival": uint16 frames (display values x 65535), yuv420p10le (High 10). Odd sizes
+    are padded by edge replication. The encoder holds its look-ahead, a few dozen frames in YUV."""
+
+    def __init__(self, path: str | Path, fps: float, crf: int | None = None, cut: str = "web") -> None:
+        if cut not in CUTS:
+            raise ValueError(f"unknown cut '{cut}': use {' or '.join(CUTS)}")
+        if not fps > 0:
+            raise ValueError(f"frame rate must be positive, got {fps}")
+        self.path, self.fps, self.cut, self.spec = Path(path), fps, cut, CUTS[cut]
+        self.crf = self.spec.crf if crf is None else crf
+        self.dtype = np.uint16 if cut == "archival" else np.uint8
+        self.frames = 0
+        self._files = ExitStack()
+        self._container: Any = None
+        self._stream: Any = None
+        self._shape: tuple[int, ...] = ()
+
+    def __enter__(self) -> Mp4Writer:
+        tmp = self._files.enter_context(atomic_path(self.path))
+        self._container = self._files.enter_context(
+            av.open(str(tmp), mode="w", format="mp4", options={"movflags": "+faststart"})
         )
-    if len(frames) == 0:
-        raise ValueError("a video needs at least one frame")
-    if not fps > 0:
-        raise ValueError(f"frame rate must be positive, got {fps}")
-    # 4:2:0 needs even sizes: pad by edge replication.
-    pad_h, pad_w = frames.shape[1] % 2, frames.shape[2] % 2
-    from fractions import Fraction
+        return self
 
-    from av.video.reformatter import ColorRange, Colorspace
+    def _open_stream(self, height: int, width: int) -> None:
+        stream = self._container.add_stream("libx264", rate=Fraction(self.fps).limit_denominator(1000))
+        stream.width, stream.height = width + width % 2, height + height % 2
+        stream.pix_fmt = self.spec.pix_fmt
+        context = stream.codec_context
+        context.color_primaries = BT709
+        context.color_trc = BT709
+        context.colorspace = BT709
+        context.color_range = RANGE_TV
+        stream.options = {
+            "crf": str(self.crf),
+            "preset": "medium",
+            "profile": self.spec.profile,
+            "x264-params": "colorprim=bt709:transfer=bt709:colormatrix=bt709",
+        }
+        self._stream = stream
 
-    source_format = "rgb48le" if cut == "archival" else "rgb24"
-    with atomic_path(path) as tmp:
-        with av.open(str(tmp), mode="w", format="mp4", options={"movflags": "+faststart"}) as container:
-            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1000))
-            stream.width, stream.height = frames.shape[2] + pad_w, frames.shape[1] + pad_h
-            stream.pix_fmt = spec.pix_fmt
-            context = stream.codec_context
-            context.color_primaries = BT709
-            context.color_trc = BT709
-            context.colorspace = BT709
-            context.color_range = RANGE_TV
-            stream.options = {
-                "crf": str(spec.crf if crf is None else crf),
-                "preset": "medium",
-                "profile": spec.profile,
-                "x264-params": "colorprim=bt709:transfer=bt709:colormatrix=bt709",
-            }
-            for frame in frames:
-                if pad_h or pad_w:
-                    frame = np.pad(frame, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
-                rgb = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format=source_format)
-                # The RGB -> YUV matrix must be BT.709 to match the tags (swscale's default is BT.601).
-                yuv = rgb.reformat(
-                    format=spec.pix_fmt, dst_colorspace=Colorspace.ITU709, dst_color_range=ColorRange.MPEG
-                )
-                for packet in stream.encode(yuv):
-                    container.mux(packet)
-            for packet in stream.encode():
-                container.mux(packet)
+    def write(self, frame: np.ndarray) -> None:
+        """Encode one (H, W, 3) frame; every frame of a video has the first one's size."""
+        frame = np.asarray(frame)
+        if frame.ndim != 3 or frame.shape[-1] != 3 or frame.dtype != self.dtype:
+            raise ValueError(
+                f"{self.cut} video frames must be {np.dtype(self.dtype)} (H, W, 3), got {frame.dtype} {frame.shape}"
+            )
+        if self._container is None:
+            raise RuntimeError("Mp4Writer.write outside its with block")
+        if self._stream is None:
+            self._shape = frame.shape
+            self._open_stream(*frame.shape[:2])
+        elif frame.shape != self._shape:
+            raise ValueError(f"{self.path.name}: frame {self.frames} is {frame.shape}, the first was {self._shape}")
+        pad_h, pad_w = frame.shape[0] % 2, frame.shape[1] % 2  # 4:2:0 needs even sizes
+        if pad_h or pad_w:
+            frame = np.pad(frame, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+        source_format = "rgb48le" if self.cut == "archival" else "rgb24"
+        rgb = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format=source_format)
+        # The RGB -> YUV matrix must be BT.709 to match the tags (swscale's default is BT.601).
+        yuv = rgb.reformat(format=self.spec.pix_fmt, dst_colorspace=Colorspace.ITU709, dst_color_range=ColorRange.MPEG)
+        for packet in self._stream.encode(yuv):
+            self._container.mux(packet)
+        self.frames += 1
+
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None
+    ) -> None:
+        if kind is None:
+            try:
+                if self._stream is None:
+                    raise ValueError(f"{self.path}: a video needs at least one frame")
+                for packet in self._stream.encode():  # flush the look-ahead
+                    self._container.mux(packet)
+            except BaseException as failure:  # the temporary file goes, nothing is published
+                self._files.__exit__(type(failure), failure, failure.__traceback__)
+                raise
+        self._files.__exit__(kind, error, trace)
+
+
+def write_mp4(path: str | Path, frames: np.ndarray, fps: float, crf: int | None = None, cut: str = "web") -> Path:
+    """Encode a (T, H, W, 3) stack of display frames with ``Mp4Writer`` (a short clip already in memory)."""
+    frames = np.asarray(frames)
+    if frames.ndim != 4 or len(frames) == 0:
+        raise ValueError(f"a video needs a (T, H, W, 3) stack of at least one frame, got shape {frames.shape}")
+    with Mp4Writer(path, fps, crf, cut) as video:
+        for frame in frames:
+            video.write(frame)
     return Path(path)
 
 

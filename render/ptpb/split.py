@@ -324,10 +324,16 @@ def merge_shards(
 def calibrate(
     scene: dict, core_settings: dict, windows: Sequence[tuple[int, int]], shards: int = 1
 ) -> dict[str, Any] | None:
-    """Time one iteration of the first window at the real size and predict the whole render: wall time
-    (one iteration's time x iterations x windows, split evenly over shards) and peak memory of one pass.
-    None for a short render (below CALIBRATE_FROM_PIXEL_ITERATIONS) or a time-budgeted one. The first
-    iteration has the widest kernels, so the prediction leans high."""
+    """Time two iterations of the first window at the real size and predict the whole render: wall time
+    and peak memory of one pass. None for a short render (below CALIBRATE_FROM_PIXEL_ITERATIONS) or a
+    time-budgeted one.
+
+    A pass costs a fixed part (the scene's structures, the film's buffers, the average at the end) and its
+    iterations; the first iteration also has the widest kernels. Timing the iterations apart (a snapshot
+    after each) gives the fixed part with the first iteration, the second iteration alone, and the finish:
+    a pass is predicted as fixed + first + (iterations - 1) x second + finish, times the windows, split
+    evenly over shards. One iteration's total times the iterations counted the fixed part and the first
+    iteration's kernels every time: 75 % high on the full video (issue 32)."""
     from pipeline.memory import PeakMemory
 
     iterations = int(core_settings.get("iterations", 0))
@@ -336,22 +342,32 @@ def calibrate(
         return None
     first, count = windows[0]
     probe = with_window(scene, first, count) if count else scene
+    probe_iterations = min(2, iterations)
     with PeakMemory() as memory:
-        out = render(probe, {**core_settings, "iterations": 1, "snapshot_every": 0, "checkpoint_every_iterations": 0})
-    per_iteration = float(out.stats["time_total_s"])
+        out = render(
+            probe,
+            {**core_settings, "iterations": probe_iterations, "snapshot_every": 1, "checkpoint_every_iterations": 0},
+        )
+    timing = pass_timing(float(out.stats["time_total_s"]), list(out.snapshot_seconds))
     del out
     passes = max(1, len([w for w in windows if w[1] > 0]))
-    wall = per_iteration * iterations * passes
+    per_pass = timing["to_first_s"] + timing["finish_s"] + (iterations - 1) * timing["per_iteration_s"]
+    wall = per_pass * passes
     per_shard = wall / max(1, shards)
+    per_iteration = timing["per_iteration_s"]
     buffers = window_bytes(scene, core_settings, max(c for _, c in windows)) if windows[0][1] else 0.0
     summary = (
-        f"calibration: 1 iteration of {count or 'no'} frames at {scene['camera']['width']}x{scene['camera']['height']} "
-        f"took {per_iteration:.1f} s; predicted {wall / 60:.1f} min for {iterations} iterations x {passes} window(s)"
+        f"calibration: {probe_iterations} iterations of {count or 'no'} frames at "
+        f"{scene['camera']['width']}x{scene['camera']['height']}: start-up and first iteration "
+        f"{timing['to_first_s']:.1f} s, then {per_iteration:.1f} s an iteration, {timing['finish_s']:.1f} s to finish; "
+        f"predicted {wall / 60:.1f} min for {iterations} iterations x {passes} window(s)"
         + (f", {per_shard / 60:.1f} min per shard on {shards} shards" if shards > 1 else "")
         + f", peak memory about {memory.peak_mib / 1024:.2f} GiB ({buffers / GIB:.2f} GiB of image buffers a pass)"
     )
     return {
         "seconds_per_iteration": per_iteration,
+        "seconds_to_first_iteration": timing["to_first_s"],
+        "seconds_to_finish": timing["finish_s"],
         "predicted_wall_s": wall,
         "predicted_wall_s_per_shard": per_shard,
         "windows": passes,
@@ -359,3 +375,14 @@ def calibrate(
         "image_buffers_gib": buffers / GIB,
         "summary": summary,
     }
+
+
+def pass_timing(total_s: float, snapshot_seconds: Sequence[float]) -> dict[str, float]:
+    """A calibration render's time split at its snapshots (one after each iteration): ``to_first_s`` (start-up
+    and the first iteration), ``per_iteration_s`` (the second iteration; the first when only one ran) and
+    ``finish_s`` (from the last iteration to the result)."""
+    if not snapshot_seconds:
+        raise ValueError("calibration needs the render's snapshot after each iteration (snapshot_every = 1)")
+    times = [float(t) for t in snapshot_seconds]
+    per_iteration = times[1] - times[0] if len(times) > 1 else times[0]
+    return {"to_first_s": times[0], "per_iteration_s": per_iteration, "finish_s": max(0.0, total_s - times[-1])}

@@ -142,3 +142,30 @@ def test_render_stage_windows_over_budget_and_merges_shards(scene_dir, tmp_path)
     shards = run_render_stage(scene_dir, cfg, tmp_path / "sh", quiet=True, shards=2, shards_dir=tmp_path / "shards")
     assert shards["shards"] == 2 and shards["iterations"] == 4
     assert_close(np.load(tmp_path / "sh" / "frames.npy"), frames)
+
+
+def test_calibration_predicts_from_the_second_iteration_and_counts_the_start_up_once(monkeypatch):
+    """Start-up and the first iteration take 15 s, each later one 2 s, the finish 3 s: 64 iterations in two
+    windows take 2 x (15 + 63 x 2 + 3) = 288 s. One iteration's total times the iterations (the old
+    prediction) would say 2 x 64 x 18 = 2304 s."""
+    from render.ptpb import split
+
+    class Timed:
+        stats = {"time_total_s": 20.0}
+        snapshot_seconds = [15.0, 17.0]
+
+    asked = {}
+
+    def fake_render(scene, settings, **kwargs):
+        asked.update(settings)
+        return Timed()
+
+    monkeypatch.setattr(split, "render", fake_render)
+    monkeypatch.setattr(split, "window_bytes", lambda scene, settings, count: count * 1e6)
+    scene = {"camera": {"width": 1920, "height": 1080}, "film": {"temporal_bins": 240, "frame_mode": "bins"}}
+    plan = split.calibrate(scene, {"iterations": 64}, [(0, 120), (120, 120)])
+    assert (asked["iterations"], asked["snapshot_every"]) == (2, 1)
+    assert plan is not None and plan["predicted_wall_s"] == pytest.approx(2 * (15 + 63 * 2 + 3))
+    assert plan["seconds_per_iteration"] == pytest.approx(2.0) and plan["seconds_to_finish"] == pytest.approx(3.0)
+    with pytest.raises(ValueError, match="snapshot after each iteration"):
+        split.pass_timing(4.0, [])

@@ -1,0 +1,68 @@
+"""Issue 32's acceptance figures for the composite of a render folder: the stage's time and own peak memory
+(pipeline/memory.py), and the clip exposure from the histogram against the old sort of every sampled pixel.
+
+    python benchmarks/bench_composite.py runs/video/render configs/assets/video.yaml
+    python benchmarks/bench_composite.py --synthetic 24x1080x1920 configs/assets/video.yaml
+
+The sort is the old computation (issue 32: a float64 luminance of every sampled pixel), so this script,
+unlike the stage, needs memory in proportion to the sampled frames (about 1 GiB a 64-frame sample at 1080p).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.config import load_config
+from pipeline.memory import PeakMemory
+from render.output.composite import FilmStatistics, clip_stride, composite_film
+from render.output.files import FrameAxis, RenderOutputs
+from render.output.tonemap import PERCENTILE_RELATIVE_ERROR, luminance
+
+
+def synthetic_film(spec: str, folder: Path) -> tuple[np.ndarray, FrameAxis]:
+    count, height, width = (int(v) for v in spec.split("x"))
+    film = np.lib.format.open_memmap(folder / "frames.npy", "w+", np.float32, (count, height, width, 3))
+    rng = np.random.default_rng(0)
+    for k in range(count):
+        film[k] = np.exp(rng.normal(-4, 2, (height, width, 3))).astype(np.float32)
+    film.flush()
+    del film
+    return np.load(folder / "frames.npy", mmap_mode="r"), FrameAxis(0.0, 0.003, "bins", count)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("source", help="a render stage folder, or TxHxW with --synthetic")
+    parser.add_argument("config", type=Path, help="the run's config (its composite section)")
+    parser.add_argument("--synthetic", action="store_true")
+    args = parser.parse_args()
+    cfg = load_config(args.config).composite
+    with tempfile.TemporaryDirectory() as scratch:
+        if args.synthetic:
+            frames, film = synthetic_film(args.source, Path(scratch))
+            steady = np.asarray(frames[0])
+        else:
+            outputs = RenderOutputs.read(args.source)
+            frames, film, steady = outputs.frames(memory_mapped=True), outputs.axis, outputs.steady()
+        out = Path(scratch) / "composite"
+        t0 = time.perf_counter()
+        with PeakMemory() as memory:
+            composite_film(frames, film, cfg, out, streaks=True, steady=steady, exr_attributes={})
+        seconds = time.perf_counter() - t0
+        print(f"composite: {seconds:.1f} s, peak {memory.peak_mib:.0f} MiB, {memory.added_mib:.0f} MiB above its start")
+        histogram = FilmStatistics.measure(frames).clip_exposure(cfg)
+        lum = np.concatenate([luminance(frame).ravel() for frame in frames[:: clip_stride(len(frames))]])
+        sorted_ = 1.0 / float(np.percentile(lum[lum > 0], cfg.exposure_percentile))
+        print(
+            f"clip exposure: histogram {histogram:.6g}, sort {sorted_:.6g}, ratio {histogram / sorted_:.6f} "
+            f"(stated error {PERCENTILE_RELATIVE_ERROR:.4%})"
+        )
+
+
+if __name__ == "__main__":
+    main()
