@@ -28,7 +28,7 @@ PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find pipeline geometry
 
 CORE_FORMATTED := $(shell find render/core -name '*.cpp' -o -name '*.hpp')
 
-.PHONY: help setup demo poster video lint test test-all test-cpp test-py bench sweep sanitize clean distclean
+.PHONY: help setup demo poster video lint test test-all test-cpp test-py bench convergence sweep sanitize clean distclean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  make %-10s %s\n", $$1, $$2}'
@@ -92,6 +92,9 @@ bench: setup ## Benchmarks: ray engine, geometry against grid size, PTPB against
 	@if [ -f benchmarks/bench_geometry.py ]; then $(PY) benchmarks/bench_geometry.py; fi
 	$(PY) benchmarks/bench_ptpb.py
 	$(PY) benchmarks/bench_dense.py
+
+convergence: setup ## Grid convergence of the grown field: demo season on 128^2, 256^2, 512^2, seeds 1-3 (~30 min)
+	$(PY) benchmarks/grid_convergence.py
 
 sweep: setup ## Run a config sweep (default configs/sweeps/default.yaml on 2 cores; SWEEP=..., CORES=...)
 	$(PY) -m pipeline sweep $(or $(SWEEP),configs/sweeps/default.yaml) --cores $(or $(CORES),2)

@@ -13,9 +13,10 @@ rule). Weighting the whole column by its top would let a one-cell crest sublimat
 wall, however deep and sheltered, and grid-scale walls between pits would never fall.
 k = max(0, Q - sink) / Q keeps the part of each day's absorbed shortwave Q above the loss to the
 sky (geometry.sky_loss times the sky view, its turbulent share stopping where the air is still).
-The switch reads sheltering from the shelter index of the horizons, and the melt fraction and the
-scattered light are spread over the e-folding depth l of absorbed light, 1 / (1 + (k l)^2), which
-selects the onset wavelength 2 pi l (DESIGN.md 3.9, 3.10). The linear terms are integrated exactly
+The switch reads sheltering from the shelter index of the horizons, and the melt fraction, the sky and
+terrain light and the scattered light are spread over the e-folding depth l of absorbed light,
+1 / (1 + (k l)^2), which selects the onset wavelength 2 pi l and gives the field its smallest physical
+scale, so that it converges once the cells resolve l (DESIGN.md 3.9, 3.10, 7). The linear terms are integrated exactly
 in Fourier space on flux time. Time stepping freezes the geometry for each horizon refresh (one per
 simulated day by default), integrates the absorbed energy over that period's sun positions, and
 applies it in sub-steps that each respect the Hamilton-Jacobi CFL limit (6.2). Heights are [m],
@@ -479,6 +480,10 @@ def grow_field(
             direct_mass, diffuse, absorbed, flux_seconds = _period_energy(
                 h, spacing, s, sun, chunk, horizons, inverse_heat, melt
             )
+            # All light is absorbed over l below the surface and spreads as far sideways, so no feature
+            # narrower than l ablates apart from its surroundings (DESIGN.md 3.10, 7 Grid convergence).
+            direct_mass = np.maximum(spread_by_penetration(direct_mass, transfer), 0.0)
+            diffuse = np.maximum(spread_by_penetration(diffuse, transfer), 0.0)
             t2 = time.perf_counter()
             volume_per_mass = s.ablation_efficiency / s.density  # [m3 kg-1]
             h_before = h.copy()

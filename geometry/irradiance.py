@@ -352,3 +352,15 @@ def field_albedo(
     escaped = float(np.mean(budget.radiosity * horizons.sky_view * area))
     absorbed = float(np.mean(budget.absorbed * area))
     return escaped / incident_horizontal, (absorbed + escaped - incident_horizontal) / incident_horizontal
+
+
+def v_groove_albedo(albedo: float, spacing: float, depth: float) -> float:
+    """Albedo of long V-grooves of the given spacing and depth [m] with Lambertian walls of ``albedo``, under
+    uniform radiosity (DESIGN.md 7, V4): a wall sees the opening with view factor sin(theta) =
+    (S/2) / sqrt(H^2 + S^2/4), so light entering the groove leaves after each bounce with that probability,
+    A = a sin(theta) / (1 - a (1 - sin(theta))). Pits closed on all sides see less sky than a groove of their
+    depth, so a pitted field is darker than this: it bounds the field albedo from above."""
+    if spacing <= 0 or depth < 0:
+        raise ValueError(f"a V-groove needs a positive spacing and a non-negative depth, got {spacing}, {depth}")
+    opening = 0.5 * spacing / np.hypot(depth, 0.5 * spacing)
+    return albedo * opening / (1.0 - albedo * (1.0 - opening))

@@ -171,24 +171,41 @@ def crest_spacing(h: np.ndarray, spacing: float, axis: int = 0) -> float:
     return h.shape[axis] * spacing / mean_count if mean_count > 0 else float("inf")
 
 
-def crest_density(h: np.ndarray, spacing: float) -> float:
-    """Crests per m^2 [m-2]: cells higher than their 8 neighbours (periodic) and above the mean surface.
-    Where forms merge the count falls (V5)."""
-    neighbours = [np.roll(np.roll(h, dy, axis=0), dx, axis=1) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
-    peak = np.all([h > other for other in neighbours], axis=0) & (h > h.mean())
+def crest_radius(efolding_depth: float) -> float:
+    """Half the onset wavelength, pi l [m]: two maxima closer than this are one form, since nothing narrower
+    than l ablates apart from its surroundings (DESIGN.md 3.10, 7 *Grid convergence*)."""
+    return float(np.pi * efolding_depth)
+
+
+def crest_density(h: np.ndarray, spacing: float, radius: float = 0.0) -> float:
+    """Crests per m^2 [m-2]: points above the mean surface and higher than every other point within
+    ``radius`` [m] (periodic), at least their 8 neighbours. Where forms merge the count falls (V5).
+
+    With radius 0 a crest is any cell above its 8 neighbours, so the count grows with every bump the grid
+    resolves; crest_radius(l) counts the forms the growth makes, whatever the cell (DESIGN.md 7)."""
+    from scipy import ndimage
+
+    reach = max(radius, spacing * np.sqrt(2.0)) / spacing
+    r = int(np.floor(reach + 1e-9))
+    y, x = np.mgrid[-r : r + 1, -r : r + 1]
+    footprint = x * x + y * y <= reach * reach + 1e-9
+    footprint[r, r] = False
+    neighbourhood = ndimage.maximum_filter(h, footprint=footprint, mode="wrap")
+    peak = (h > neighbourhood) & (h > h.mean())
     return float(peak.sum()) / (h.size * spacing**2)
 
 
-def season_history(snapshots: np.ndarray, spacing: float) -> dict:
+def season_history(snapshots: np.ndarray, spacing: float, crest_radius: float = 0.0) -> dict:
     """Spacing, height and crest count of each snapshot (V5): crest_spacing_m and crest_to_trough_m
-    across the rows (N-S transects), their ratio, and crest_density_per_m2."""
+    across the rows (N-S transects), their ratio, and crest_density_per_m2 (crests within ``crest_radius``
+    [m] counted once)."""
     spacings = [crest_spacing(h, spacing) for h in snapshots]
     heights = [crest_to_trough(h) for h in snapshots]
     return {
         "crest_spacing_m": spacings,
         "crest_to_trough_m": heights,
         "spacing_to_height": [s / hh if hh > 0 else float("inf") for s, hh in zip(spacings, heights)],
-        "crest_density_per_m2": [crest_density(h, spacing) for h in snapshots],
+        "crest_density_per_m2": [crest_density(h, spacing, crest_radius) for h in snapshots],
     }
 
 
@@ -302,17 +319,17 @@ def aspect_table(h: np.ndarray, spacing: float, bins: int = 36, steep_deg: float
     return {"bin_edges_deg": edges.tolist(), "fraction": fraction.tolist(), "steep_deg": steep_deg}
 
 
-def morphology(h: np.ndarray, spacing: float) -> dict:
+def morphology(h: np.ndarray, spacing: float, crest_radius: float = 0.0) -> dict:
     """All shape metrics of one field in a flat dict. spacing_to_height is V3's lambda_dom / H with
     lambda_dom = crest_spacing and H = crest_to_trough (both across the rows, north-south): a grown
     field's N-S spectrum is broad and its peak (row_spacing) jumps between bins from seed to seed,
-    where the crest count is steady (DESIGN.md 7)."""
+    where the crest count is steady (DESIGN.md 7). crest_radius [m]: see crest_density."""
     out = relief(h)
     out["crest_to_trough_m"] = crest_to_trough(h, axis=0)
     out["row_spacing_m"] = row_spacing(h, spacing)
     out["crest_spacing_m"] = crest_spacing(h, spacing, axis=0)
     out["dominant_wavelength_m"] = dominant_wavelength(h, spacing)
-    out["crest_density_per_m2"] = crest_density(h, spacing)
+    out["crest_density_per_m2"] = crest_density(h, spacing, crest_radius)
     out.update(ridge_orientation(h, spacing))
     out.update(lean(h, spacing))
     out["axis_lean_north_deg"] = axis_lean(h, spacing)

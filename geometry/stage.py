@@ -97,7 +97,8 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
 
     t = time.perf_counter()
     last_day = cfg.start_day_of_year + cfg.days - 1
-    summary_metrics = metrics.morphology(h, spacing)
+    radius = metrics.crest_radius(cfg.optical_efolding_depth)
+    summary_metrics = metrics.morphology(h, spacing, radius)
     delta = float(sunpath.declination(last_day))
     summary_metrics["noon_zenith_angle_deg"] = float(np.degrees(sunpath.noon_zenith_angle(cfg.latitude, delta)))
     summary_metrics["noon_zenith_growth_weighted_deg"] = float(
@@ -108,7 +109,7 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     summary_metrics["axis_lean_toward_equator_deg"] = toward_equator * summary_metrics["axis_lean_north_deg"]
     summary_metrics.update(noon_radiation_metrics(h, spacing, cfg, last_day))
     summary_metrics["onset_wavelength_m"] = ablation.onset_wavelength(cfg.optical_efolding_depth)
-    history = {"day": grown.snapshot_days.tolist(), **metrics.season_history(grown.snapshots, spacing)}
+    history = {"day": grown.snapshot_days.tolist(), **metrics.season_history(grown.snapshots, spacing, radius)}
     aspects = metrics.aspect_table(h, spacing)
     summary_metrics.update(
         {

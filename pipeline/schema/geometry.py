@@ -15,7 +15,7 @@ from pipeline.schema.base import StrictModel
 
 # Cells per physical length for a grid-independent field (geometry/DESIGN.md 7, *Grid convergence*).
 CELLS_PER_CORRELATION_LENGTH = 4.0
-CELLS_PER_EFOLDING_DEPTH = 2.0
+CELLS_PER_EFOLDING_DEPTH = 1.5
 
 
 class GeometryConfig(StrictModel):

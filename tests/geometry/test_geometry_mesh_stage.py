@@ -65,7 +65,7 @@ def test_site_presets_validate(preset):
 
 
 def test_stage_writes_every_output(tmp_path):
-    cfg = GeometryConfig(days=4, snapshots=4)
+    cfg = GeometryConfig(days=10, snapshots=4)
     summary = run_geometry_stage(cfg, tmp_path, seed=5, quiet=True)
     for name in (
         "heightfield.npz",

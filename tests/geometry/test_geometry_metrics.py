@@ -66,6 +66,23 @@ def test_crest_density_counts_isolated_peaks():
     assert metrics.crest_density(_rows(np.cos(2 * np.pi * Y / 0.5)), SPACING) == 0.0
 
 
+def test_crest_radius_counts_a_form_once_whatever_the_grid():
+    """Peaks 0.5 m apart carrying a 12.5 cm ripple: counted per cell, the ripple's crests add to the forms'
+    once a grid resolves them (4 per m^2 on 6.25 cm cells, 12 on 3.1 cm); counted once within pi l (l = 6 cm:
+    0.19 m), only the forms count, 4 per m^2 on both grids, and the 0.5 m forms themselves stay separate."""
+    per_cell = {}
+    for n in (64, 128):
+        spacing = L / n
+        coords = np.arange(n) * spacing
+        y, x = np.meshgrid(coords, coords, indexing="ij")
+        forms = np.cos(2 * np.pi * y / 0.5) + np.cos(2 * np.pi * x / 0.5)
+        ripple = 0.1 * np.cos(2 * np.pi * x / 0.125) * np.cos(2 * np.pi * y / 0.125)
+        assert metrics.crest_density(forms + ripple, spacing, metrics.crest_radius(0.06)) == pytest.approx(4.0)
+        per_cell[n] = metrics.crest_density(forms + ripple, spacing)
+    assert per_cell == {64: pytest.approx(4.0), 128: pytest.approx(12.0)}
+    assert metrics.crest_radius(0.06) == pytest.approx(np.pi * 0.06)
+
+
 def test_dominant_wavelength_is_never_the_domain():
     """A field whose strongest mode is the domain's fundamental has no repeat inside the domain:
     the answer is the strongest wavelength of L/2 or shorter, here the 0.8 m rows."""

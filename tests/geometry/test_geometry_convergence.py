@@ -1,0 +1,90 @@
+"""Grid convergence of the grown field at reduced size (geometry/DESIGN.md 7, *Grid convergence*; issue 27).
+
+The Tapado season on a 2 m domain, 30 days, on grids of 6.25, 3.1 and 1.6 cm cells from one seed: the start
+is the same continuous surface on all three (DESIGN.md 3.12) and light absorbed below the surface spreads over
+l = 6 cm (3.10), so the field's numbers settle as the cells shrink, as in the full study on 8 m
+(benchmarks/grid_convergence.py). Also the Richardson extrapolation and the resolution guard."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from geometry import ablation, convergence, irradiance
+from pipeline.config import load_config, load_raw
+from pipeline.schema.geometry import GeometryConfig
+
+ROOT = Path(__file__).resolve().parents[2]
+SITES = ROOT / "configs" / "presets" / "sites"
+
+
+def _season(grid: int) -> dict:
+    site = load_raw(SITES / "tapado.yaml")["geometry"]
+    cfg = GeometryConfig(**{**site, "grid_cells": grid, "domain_size": 2.0, "days": 30, "snapshots": 2})
+    rng = np.random.default_rng(1)
+    h0 = ablation.initial_height_field_from_config(cfg, rng)
+    h = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng).height
+    horizons = irradiance.compute_horizons(h, cfg.spacing, 16)
+    return {"rms": float(h.std()), "sky_view": float(horizons.sky_view.mean()), "height": h, "cell": cfg.spacing}
+
+
+@pytest.fixture(scope="module")
+def seasons():
+    return {grid: _season(grid) for grid in (32, 64, 128)}
+
+
+def test_the_field_settles_as_the_cells_halve(seasons):
+    """RMS relief and mean sky view converge monotonically: each halving of the cell moves them less than the
+    one before (on 2 m, 30 days into the season, seed 1, measured 6.6, 9.5, 11.4 cm RMS: steps of 3.0 and
+    1.9 cm), and the 128^2 field seen on the 64^2 nodes is the 64^2 field (the same forms in the same places)."""
+    for key in ("rms", "sky_view"):
+        coarse, medium, fine = (seasons[g][key] for g in (32, 64, 128))
+        first, second = medium - coarse, fine - medium
+        assert first * second > 0 and abs(second) < 0.8 * abs(first), (key, coarse, medium, fine)
+    fine, medium = seasons[128]["height"][::2, ::2], seasons[64]["height"]
+    assert np.corrcoef(fine.ravel(), medium.ravel())[0, 1] > 0.9
+
+
+def test_richardson_recovers_a_known_limit():
+    """f(cell) = 2 + 3 cell^p on cells 4, 2, 1: the limit 2 and the order p, measured; an oscillating
+    sequence falls back to the scheme's first order and says so."""
+    for order in (1.0, 2.0):
+        values = [2.0 + 3.0 * cell**order for cell in (4.0, 2.0, 1.0)]
+        estimate = convergence.richardson(*values)
+        assert estimate.extrapolated == pytest.approx(2.0, rel=1e-12)
+        assert estimate.order == pytest.approx(order, rel=1e-12)
+        assert estimate.order_measured
+    oscillating = convergence.richardson(1.0, 1.2, 1.1)
+    assert not oscillating.order_measured
+    assert oscillating.order == convergence.SCHEME_ORDER
+    assert oscillating.extrapolated == pytest.approx(1.0)
+
+
+def test_validate_warns_on_the_demo_at_64_cells():
+    """pipeline validate names the length the grid misses and a grid that resolves it."""
+    cfg = load_config(ROOT / "configs" / "demo.yaml", ["geometry.grid_cells=64"]).geometry
+    warnings = cfg.resolution_warnings()
+    assert len(warnings) == 1
+    assert "geometry.grid_cells = 64" in warnings[0] and "geometry.initial_correlation_length" in warnings[0]
+    suggested = int(warnings[0].split("Set geometry.grid_cells: ")[1].split()[0])
+    resolved = load_config(ROOT / "configs" / "demo.yaml", [f"geometry.grid_cells={suggested}"]).geometry
+    assert resolved.resolution_warnings() == []
+    assert load_config(ROOT / "configs" / "demo.yaml").geometry.resolution_warnings() == []
+
+
+def test_validate_warns_on_a_white_noise_start():
+    cfg = GeometryConfig(initial_correlation_length=None, grid_cells=512)
+    assert any("white-noise start" in w for w in cfg.resolution_warnings())
+    lab = GeometryConfig(**load_raw(SITES / "lab_micro.yaml")["geometry"])
+    assert lab.resolution_warnings() == []  # sublimation only: V1's linear start
+
+
+def test_v_groove_albedo_limits():
+    """Flat (depth 0) returns the wall albedo; deep grooves trap light; the issue's H = S example."""
+    assert irradiance.v_groove_albedo(0.55, 1.0, 0.0) == pytest.approx(0.55)
+    sin_theta = 0.5 / np.hypot(1.0, 0.5)
+    expected = 0.55 * sin_theta / (1 - 0.55 * (1 - sin_theta))
+    assert irradiance.v_groove_albedo(0.55, 1.0, 1.0) == pytest.approx(expected, rel=1e-12)
+    assert irradiance.v_groove_albedo(0.55, 1.0, 10.0) < 0.1
+    with pytest.raises(ValueError, match="V-groove"):
+        irradiance.v_groove_albedo(0.55, 0.0, 1.0)
