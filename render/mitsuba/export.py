@@ -244,6 +244,7 @@ def scene_to_mitsuba(
 
     def place(point) -> list[float]:
         return [float(v) for v in frame @ mi.ScalarPoint3f([float(v) for v in point])]
+
     out: dict[str, Any] = {"type": "scene"}
 
     if transient:

@@ -36,7 +36,11 @@ def _render_passes(
     plan: list[Tile | None] = list(plan_tiles(scene, scene_dir, tiles)) if tiles else [None]
     with PeakMemory() as memory:  # the reference renderer's own peak (pipeline/memory.py)
         # One tile keeps its scene loaded; several are loaded in turn, so that only one is in memory.
-        loaded = mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass)) if not tiles else None
+        loaded = (
+            mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass))
+            if not tiles
+            else None
+        )
         sums: list[np.ndarray] = []
         done = passes = 0
         last = 0.0
@@ -81,8 +85,7 @@ def _render_pass(mi, scene, scene_dir, plan, loaded, transient, spp_per_pass, se
         mi_scene = loaded or mi.load_dict(
             scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass, tile=tile)
         )
-        # mitsuba.util.pyi types seed as mi.UInt32 (its own default is 0); the binding takes a Python int.
-        result = mi.render(mi_scene, seed=pass_seed(seed, k, index), spp=spp)  # type: ignore[arg-type]
+        result = mi.render(mi_scene, seed=pass_seed(seed, k, index), spp=spp)
         images = [np.array(result[1]), np.array(result[0])] if transient else [np.array(result)]
         images = [im[..., :3].astype(np.float64) for im in images]
         if tile is None:

@@ -551,7 +551,9 @@ def test_tiles_undo_mitsubas_ray_offsets_in_dense_snow(tmp_path):
         scene = make_scene(
             folder,
             [("slab", shapes.box_mesh(centre - [3, 3, 1.5], centre + [3, 3, 0]), {"kind": "null", "interior": "snow"})],
-            camera=Camera(origin=tuple(centre + [0, 0, 3.0]), target=tuple(centre), up=(0, 1, 0), fov=10, width=8, height=8),
+            camera=Camera(
+                origin=tuple(centre + [0, 0, 3.0]), target=tuple(centre), up=(0, 1, 0), fov=10, width=8, height=8
+            ),
             lights=[sun((0, 0, 1), (1, 1, 1))],
             media={"snow": null_medium([118.8] * 3, [1.2] * 3, g=0.0)},
         )
