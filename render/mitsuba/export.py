@@ -15,8 +15,14 @@ Conventions, on top of render/scene/model.py and render/core/DESIGN.md §1-§2:
   τ = 0, so in transient renders the film window is moved later by the OPL from the ptpb τ = 0
   plane to the disk plus the disk's mean excess path (``disk_sun_opl_shift``; when it is the only timed
   emitter), and frames stay on the ptpb time axis.
-- Rendering goes in passes of ``spp_per_pass``; pass i uses seed + i (Mitsuba adds the sampler's
-  ``seed`` to ``render``'s seed, so the dict holds ``seed`` and pass i renders with seed=i).
+- Rendering goes in passes of ``spp_per_pass``, and optionally in tiles (``Tile``); each pass of each tile
+  renders with its own seed, drawn from (seed, tile, pass) by ``pass_seed``, so that runs of different seeds
+  share no samples.
+- Mitsuba starts every ray that leaves a surface (1 + max|p|) · 9·10⁻⁵ scene units off it, single precision.
+  A camera path that enters index-matched snow therefore starts below the face and sees the brighter radiance
+  there: +1.3 % on the default sweep's firn point (render/core/DESIGN.md §12). A ``Tile`` renders a crop of the
+  film with the scene in millimetres and moved so that the middle of what the tile sees lies at the origin,
+  which shrinks that skip to the tile's own extent.
 """
 
 from __future__ import annotations
@@ -24,18 +30,38 @@ from __future__ import annotations
 import importlib
 import logging
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from geometry.meshio import read_mesh
-from render.scene.model import Scene, bounding_sphere_of_points
+from render.scene.model import Scene, bounding_sphere_of_points, camera_ray_direction
 
 log = logging.getLogger(__name__)
 
 DEFAULT_DISK_DISTANCE_RADII = 1000.0
 TRANSIENT_SEED_OFFSET = 1 << 16  # keeps the transient reference's noise independent of the steady one
+TILE_UNITS = 1000.0  # scene units per metre in a tile: millimetres, so the offset's constant term is 1 µm
+
+
+@dataclass(frozen=True)
+class Tile:
+    """A crop of the film [pixels] rendered with the scene point ``origin`` [m] moved to Mitsuba's origin."""
+
+    x: int
+    y: int
+    width: int
+    height: int
+    origin: tuple[float, float, float]
+
+
+def pass_seed(seed: int, tile: int, index: int) -> int:
+    """Mitsuba's 32-bit seed of pass ``index`` of tile ``tile`` in a run of ``seed``: a hash, so that seeds
+    s and s + 1 share no pass (seed + pass did) and cropped tiles, whose pixels Mitsuba numbers from 0, do
+    not repeat each other's streams."""
+    return int(np.random.SeedSequence([seed, tile, index]).generate_state(1)[0])
 
 
 class ReferenceRefused(ValueError):
@@ -140,11 +166,46 @@ def disk_sun_opl_shift(scene: Scene, scene_dir: Path) -> float:
     return float((disk["center"] - origin) @ s) + mean_excess
 
 
+def plan_tiles(scene: Scene, scene_dir: Path, tiles: int) -> list[Tile]:
+    """The film cut into square tiles, ``tiles`` of them along its longer side. Each tile's origin is the
+    centre of the box around the points that its pixel centres see (the point that makes max|p| smallest
+    there); a tile that sees nothing within the bounding sphere keeps the sphere's centre."""
+    from render.ptpb.raytrace import RayEngine
+
+    if tiles < 1:
+        raise ValueError(f"tiles must be at least 1, got {tiles}")
+    scene_dir = Path(scene_dir)
+    cam = scene.camera
+    centre, radius = _bounding_sphere(scene, scene_dir)
+    engine = RayEngine()
+    for i, shape in enumerate(scene.shapes):
+        vertices, faces = read_mesh(scene.mesh_path(shape, scene_dir))
+        engine.add_mesh(np.asarray(vertices, np.float32), np.asarray(faces, np.uint32), i)
+    engine.commit()
+    px, py = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+    directions = camera_ray_direction(cam, px.ravel(), py.ravel()).reshape(-1, 3)
+    origins = np.broadcast_to(np.asarray(cam.origin, np.float64), directions.shape)
+    hits = engine.intersect(origins, directions)
+    points = origins + np.where(hits.hit, hits.t, 0.0)[:, None] * directions
+    seen = hits.hit & (np.linalg.norm(points - centre, axis=1) <= 1.001 * radius)
+    points, seen = points.reshape(cam.height, cam.width, 3), seen.reshape(cam.height, cam.width)
+    size = math.ceil(max(cam.width, cam.height) / tiles)
+    plan = []
+    for y in range(0, cam.height, size):
+        for x in range(0, cam.width, size):
+            w, h = min(size, cam.width - x), min(size, cam.height - y)
+            inside = points[y : y + h, x : x + w][seen[y : y + h, x : x + w]]
+            origin = 0.5 * (inside.min(axis=0) + inside.max(axis=0)) if len(inside) else centre
+            plan.append(Tile(x, y, w, h, (float(origin[0]), float(origin[1]), float(origin[2]))))
+    return plan
+
+
 def _rgb(value) -> dict[str, Any]:
     return {"type": "rgb", "value": [float(v) for v in value]}
 
 
-def _medium_dict(medium) -> dict[str, Any]:
+def _medium_dict(medium, units: float = 1.0) -> dict[str, Any]:
+    """``units`` scene units per metre: the coefficients are per scene unit."""
     sigma_s = np.asarray(medium.sigma_s, np.float64)
     sigma_t = sigma_s + np.asarray(medium.sigma_a, np.float64)
     albedo = np.divide(sigma_s, sigma_t, out=np.zeros(3), where=sigma_t > 0)
@@ -152,7 +213,7 @@ def _medium_dict(medium) -> dict[str, Any]:
     return {
         "type": "homogeneous",
         "sigma_t": _rgb(sigma_t / scale),
-        "scale": scale,
+        "scale": scale / units,
         "albedo": _rgb(np.clip(albedo, 0.0, 1.0)),
         "phase": {"type": "hg", "g": float(medium.g)},
     }
@@ -163,8 +224,11 @@ def _medium_dict(medium) -> dict[str, Any]:
 NEAR_CLIP = 1e-4
 
 
-def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int, seed: int = 0) -> dict:
-    """The ``mi.load_dict`` dictionary of ``scene`` (meshes resolved against ``scene_dir``).
+def scene_to_mitsuba(
+    scene: Scene, scene_dir: Path, *, transient: bool, spp: int, seed: int = 0, tile: Tile | None = None
+) -> dict:
+    """The ``mi.load_dict`` dictionary of ``scene`` (meshes resolved against ``scene_dir``); with ``tile``,
+    of that crop of the film, in millimetres, with ``tile.origin`` at Mitsuba's origin (the same images).
 
     A variant must be set (``use_variant``); transient dicts need mitransient imported to load."""
     import mitsuba as mi
@@ -175,6 +239,12 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
     scene_dir = Path(scene_dir)
     cam, film = scene.camera, scene.film
     centre, radius = _bounding_sphere(scene, scene_dir)
+    units = TILE_UNITS if tile is not None else 1.0
+    frame = T().scale(units) @ T().translate([-float(v) for v in tile.origin]) if tile is not None else T()
+
+    def place(point) -> list[float]:
+        return [float(v) for v in frame @ mi.ScalarPoint3f([float(v) for v in point])]
+
     out: dict[str, Any] = {"type": "scene"}
 
     if transient:
@@ -189,8 +259,8 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
             "width": cam.width,
             "height": cam.height,
             "temporal_bins": film.temporal_bins,
-            "bin_width_opl": film.bin_width_opl,
-            "start_opl": film.start_opl + disk_sun_opl_shift(scene, scene_dir),
+            "bin_width_opl": film.bin_width_opl * units,
+            "start_opl": (film.start_opl + disk_sun_opl_shift(scene, scene_dir)) * units,
             "rfilter": {"type": "box"},
         }
     else:
@@ -203,8 +273,10 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
             "pixel_format": "rgb",
         }
 
+    if tile is not None:
+        film_dict.update(crop_offset_x=tile.x, crop_offset_y=tile.y, crop_width=tile.width, crop_height=tile.height)
     for key, medium in scene.media.items():  # declared first so that shapes and the camera can refer to them
-        out[f"medium_{key}"] = _medium_dict(medium)
+        out[f"medium_{key}"] = _medium_dict(medium, units)
 
     def ref(key: str) -> dict[str, str]:
         if key not in scene.media:
@@ -220,9 +292,9 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
         "type": "perspective",
         "fov": float(cam.fov),
         "fov_axis": cam.fov_axis,
-        "far_clip": float(far),
-        "near_clip": NEAR_CLIP,
-        "to_world": T().look_at(origin=list(cam.origin), target=list(cam.target), up=list(cam.up)),
+        "far_clip": float(far) * units,
+        "near_clip": NEAR_CLIP * units,
+        "to_world": T().look_at(origin=place(cam.origin), target=place(cam.target), up=list(cam.up)),
         "film": film_dict,
         "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)},
     }
@@ -236,6 +308,8 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
             "filename": str(Path(scene.mesh_path(shape, scene_dir)).resolve()),
             "face_normals": True,
         }
+        if tile is not None:
+            d["to_world"] = frame
         if shape.kind == "null":
             d["bsdf"] = {"type": "null"}
         elif shape.kind == "dielectric":
@@ -264,12 +338,12 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
             }
         elif kind == "sun" and light["model"] == "disk":
             disk = disk_sun(light, centre, radius)
-            frame = T().look_at(
+            disk_frame = T().look_at(
                 origin=list(disk["center"]), target=list(disk["center"] + disk["normal"]), up=_any_up(disk["normal"])
             )  # the disk's local +z (its emitting side) faces the scene
             out[key] = {
                 "type": "disk",
-                "to_world": frame @ T().scale([disk["radius"], disk["radius"], 1.0]),
+                "to_world": frame @ disk_frame @ T().scale([disk["radius"], disk["radius"], 1.0]),
                 "bsdf": {"type": "diffuse", "reflectance": _rgb((0, 0, 0))},
                 "emitter": {"type": "area", "radiance": _rgb(disk["radiance"])},
             }
@@ -280,17 +354,17 @@ def scene_to_mitsuba(scene: Scene, scene_dir: Path, *, transient: bool, spp: int
         elif kind == "point":
             out[key] = {
                 "type": "point",
-                "position": [float(v) for v in light["position"]],
-                "intensity": _rgb(light["intensity"]),
+                "position": place(light["position"]),
+                "intensity": _rgb(np.asarray(light["intensity"]) * units**2),  # W/sr: irradiance falls as 1/r²
             }
         elif kind == "spot":
             p, direction = np.asarray(light["position"], np.float64), _unit(light["direction"])
             out[key] = {
                 "type": "spot",
-                "intensity": _rgb(light["intensity"]),
+                "intensity": _rgb(np.asarray(light["intensity"]) * units**2),
                 "cutoff_angle": float(light["cutoff_angle_deg"]),
                 "beam_width": float(light["beam_width_deg"]),
-                "to_world": T().look_at(origin=list(p), target=list(p + direction), up=_any_up(direction)),
+                "to_world": T().look_at(origin=place(p), target=place(p + direction), up=_any_up(direction)),
             }
         else:
             raise ValueError(f"unknown light type {kind!r}")

@@ -25,6 +25,7 @@ class _PassOptions(TypedDict):
     spp_per_pass: int
     time_budget_s: float | None
     quiet: bool
+    tiles: int
 
 
 def reference_scene(scene_dir: Path, cfg: ReferenceConfig) -> Scene:
@@ -50,7 +51,12 @@ def run_reference_stage(
     for w in warnings:
         log.warning("reference: %s", w)
     out_dir.mkdir(parents=True, exist_ok=True)
-    common: _PassOptions = {"spp_per_pass": cfg.spp_per_pass, "time_budget_s": cfg.time_budget_s, "quiet": quiet}
+    common: _PassOptions = {
+        "spp_per_pass": cfg.spp_per_pass,
+        "time_budget_s": cfg.time_budget_s,
+        "quiet": quiet,
+        "tiles": cfg.tiles,
+    }
     timing: dict[str, Any] = {
         "steady": None,
         "transient": None,
