@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from geometry import ablation, convergence, metrics, stage, sunpath  # noqa: E402
+from geometry import ablation, convergence, stage  # noqa: E402
 from pipeline.atomic import write_json_atomic, write_text_atomic  # noqa: E402
 from pipeline.config import load_config  # noqa: E402
 
@@ -55,10 +55,8 @@ def grow_and_measure(config: str, overrides: list[str], grid: int, seed: int) ->
     h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     growth_s = time.perf_counter() - t0
-    h = grown.height
-    shape = metrics.morphology(h, cfg.spacing, metrics.crest_radius(cfg.optical_efolding_depth))
-    radiation = stage.noon_radiation_metrics(h, cfg.spacing, cfg, cfg.start_day_of_year + cfg.days - 1)
-    toward_equator = 1.0 if cfg.latitude < 0 else -1.0
+    shape = stage.field_metrics(grown, cfg)
+    keys = [k for k, _, _ in QUANTITIES] + ["axis_lean_toward_equator_deg", "ridge_deviation_from_east_west_deg"]
     return {
         "grid": grid,
         "seed": seed,
@@ -66,17 +64,9 @@ def grow_and_measure(config: str, overrides: list[str], grid: int, seed: int) ->
         "domain_m": cfg.domain_size,
         "days": cfg.days,
         "growth_s": growth_s,
-        **{k: shape[k] for k in ("crest_spacing_m", "crest_to_trough_m", "relief_m", "crest_density_per_m2")},
-        "spacing_to_height": shape["spacing_to_height"],
-        "albedo_difference": radiation["albedo_difference"],
-        "lean_toward_equator_deg": toward_equator * shape["lean_north_deg"],
-        "axis_lean_toward_equator_deg": toward_equator * shape["axis_lean_north_deg"],
-        "ridge_deviation_from_east_west_deg": shape["ridge_deviation_from_east_west_deg"],
-        "noon_zenith_growth_weighted_deg": float(
-            np.degrees(sunpath.growth_weighted_noon_zenith(cfg.latitude, cfg.start_day_of_year, grown.relief_history))
-        ),
+        **{k: shape[k] for k in [*keys, "noon_zenith_growth_weighted_deg"]},
         "relief_history_m": (2 * np.sqrt(2) * grown.relief_history).tolist(),
-        "height": h,
+        "height": grown.height,
     }
 
 

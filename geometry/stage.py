@@ -39,6 +39,25 @@ def noon_radiation_metrics(h: np.ndarray, spacing: float, cfg: GeometryConfig, d
     }
 
 
+def field_metrics(grown: ablation.GrowthResult, cfg: GeometryConfig) -> dict:
+    """The grown field's shape (crests counted once within metrics.crest_radius), its lean toward the
+    equator against the noon zenith angles, and its noon radiation (V3, V4; DESIGN.md 7)."""
+    h, spacing = grown.height, grown.spacing
+    last_day = cfg.start_day_of_year + cfg.days - 1
+    out = metrics.morphology(h, spacing, metrics.crest_radius(cfg.optical_efolding_depth))
+    delta = float(sunpath.declination(last_day))
+    out["noon_zenith_angle_deg"] = float(np.degrees(sunpath.noon_zenith_angle(cfg.latitude, delta)))
+    out["noon_zenith_growth_weighted_deg"] = float(
+        np.degrees(sunpath.growth_weighted_noon_zenith(cfg.latitude, cfg.start_day_of_year, grown.relief_history))
+    )
+    toward_equator = 1.0 if cfg.latitude < 0 else -1.0
+    out["lean_toward_equator_deg"] = toward_equator * out["lean_north_deg"]
+    out["axis_lean_toward_equator_deg"] = toward_equator * out["axis_lean_north_deg"]
+    out.update(noon_radiation_metrics(h, spacing, cfg, last_day))
+    out["onset_wavelength_m"] = ablation.onset_wavelength(cfg.optical_efolding_depth)
+    return out
+
+
 def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: bool = False) -> dict:
     """Grow, mesh, measure and draw one field; returns a small JSON-able summary."""
     from tqdm import tqdm
@@ -96,19 +115,8 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     timings["mesh_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    last_day = cfg.start_day_of_year + cfg.days - 1
+    summary_metrics = field_metrics(grown, cfg)
     radius = metrics.crest_radius(cfg.optical_efolding_depth)
-    summary_metrics = metrics.morphology(h, spacing, radius)
-    delta = float(sunpath.declination(last_day))
-    summary_metrics["noon_zenith_angle_deg"] = float(np.degrees(sunpath.noon_zenith_angle(cfg.latitude, delta)))
-    summary_metrics["noon_zenith_growth_weighted_deg"] = float(
-        np.degrees(sunpath.growth_weighted_noon_zenith(cfg.latitude, cfg.start_day_of_year, grown.relief_history))
-    )
-    toward_equator = 1.0 if cfg.latitude < 0 else -1.0
-    summary_metrics["lean_toward_equator_deg"] = toward_equator * summary_metrics["lean_north_deg"]
-    summary_metrics["axis_lean_toward_equator_deg"] = toward_equator * summary_metrics["axis_lean_north_deg"]
-    summary_metrics.update(noon_radiation_metrics(h, spacing, cfg, last_day))
-    summary_metrics["onset_wavelength_m"] = ablation.onset_wavelength(cfg.optical_efolding_depth)
     history = {"day": grown.snapshot_days.tolist(), **metrics.season_history(grown.snapshots, spacing, radius)}
     aspects = metrics.aspect_table(h, spacing)
     summary_metrics.update(
@@ -136,7 +144,7 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
         cfg.preview_size,
         f"grown field, {cfg.latitude:.1f}° lat, {cfg.days} days (north up)",
     )
-    noon_sun = sunpath.sun_vector(cfg.latitude, delta, 0.0)
+    noon_sun = sunpath.sun_vector(cfg.latitude, float(sunpath.declination(cfg.start_day_of_year + cfg.days - 1)), 0.0)
     preview.render_preview(
         out_dir / "preview.png",
         solid,

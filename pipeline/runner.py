@@ -160,16 +160,19 @@ def _planned(config, stages: Sequence[Stage], only: Sequence[str] | None, force:
     for stage in stages:
         if not stage.enabled(config) or (only is not None and stage.name not in only):
             continue
-        manifest = read_manifest(base / stage.name)
         if (
             force
-            or manifest is None
-            or manifest.get("config_hash") != config_hash(config, stage.config_keys)
+            or not _made_from_config(config, stage, read_manifest(base / stage.name))
             or running.intersection(stage.upstream)
         ):
             planned.append(stage)
             running.add(stage.name)
     return planned
+
+
+def _made_from_config(config, stage: Stage, manifest: dict | None) -> bool:
+    """Whether a stage's manifest records the current config of the keys the stage reads."""
+    return manifest is not None and manifest.get("config_hash") == config_hash(config, stage.config_keys)
 
 
 def stage_status(config, stage: Stage, inputs_digests: dict[str, str]) -> tuple[bool, dict | None]:
@@ -179,7 +182,7 @@ def stage_status(config, stage: Stage, inputs_digests: dict[str, str]) -> tuple[
     if manifest is None:
         return False, None
     up_to_date = (
-        manifest.get("config_hash") == config_hash(config, stage.config_keys)
+        _made_from_config(config, stage, manifest)
         and manifest.get("inputs") == inputs_digests
         and outputs_intact(final, manifest)
     )

@@ -187,27 +187,16 @@ class GeometryConfig(StrictModel):
         """Why this grid may not hold a grid-independent field, with a grid that would (geometry/DESIGN.md 7,
         *Grid convergence*): cells must resolve the start's correlation length and the e-folding depth l."""
         warnings = []
-        needed = []
+        lengths = []  # (config key, physical length [m], cells it needs)
         if self.initial_wavelength is None and self.initial_correlation_length is not None:
-            needed.append(
-                (
-                    self.initial_correlation_length / CELLS_PER_CORRELATION_LENGTH,
-                    "geometry.initial_correlation_length",
-                    self.initial_correlation_length,
-                    CELLS_PER_CORRELATION_LENGTH,
-                )
+            lengths.append(
+                ("geometry.initial_correlation_length", self.initial_correlation_length, CELLS_PER_CORRELATION_LENGTH)
             )
         if self.melt_enabled and self.optical_efolding_depth > 0:
-            needed.append(
-                (
-                    self.optical_efolding_depth / CELLS_PER_EFOLDING_DEPTH,
-                    "geometry.optical_efolding_depth",
-                    self.optical_efolding_depth,
-                    CELLS_PER_EFOLDING_DEPTH,
-                )
-            )
-        if needed:
-            finest, key, length, cells = min(needed)
+            lengths.append(("geometry.optical_efolding_depth", self.optical_efolding_depth, CELLS_PER_EFOLDING_DEPTH))
+        if lengths:
+            key, length, cells = min(lengths, key=lambda entry: entry[1] / entry[2])
+            finest = length / cells
             if self.spacing > finest * (1.0 + 1e-9):
                 grid = 1 << math.ceil(math.log2(self.domain_size / finest))
                 warnings.append(
