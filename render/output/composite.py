@@ -105,15 +105,40 @@ def clip_exposure(frames: np.ndarray, cfg) -> float:
 
 
 class _Frame:
-    """Frame ``k`` of a pass, with what several outputs share computed once."""
+    """Frame ``k`` of a pass, with what several outputs share computed once.
+
+    A transient frame is mostly black: light arrives at a pixel in a few of the frames. Every display value
+    is a function of its own pixel alone, and a pixel without light shows 0 (each curve maps 0 to 0), so
+    the curves run on the lit pixels only (``lit``); the results are the whole-frame computation's, bit for
+    bit (render/output/LOOK.md, "Memory")."""
 
     def __init__(self, k: int, frame: np.ndarray, clip_scale: float, curve) -> None:
         self.k, self.frame, self.clip_scale, self.curve = k, frame, clip_scale, curve
 
     @cached_property
+    def lit(self) -> np.ndarray:
+        """Flat indices of the pixels with a non-zero value in any channel."""
+        return np.flatnonzero((self.frame != 0).any(axis=-1))
+
+    def scatter(self, values: np.ndarray, dtype) -> np.ndarray:
+        """(H, W, 3) of ``dtype``: ``values`` (one row per lit pixel) at the lit pixels, 0 elsewhere."""
+        out = np.zeros(self.frame.shape, dtype)
+        out.reshape(-1, 3)[self.lit] = values
+        return out
+
+    @cached_property
+    def clip_display_lit(self) -> np.ndarray:
+        """Display values in [0, 1] at the clip's exposure of the lit pixels (float64, (N, 3))."""
+        return display_values(self.frame.reshape(-1, 3)[self.lit], self.clip_scale, self.curve)
+
+    @cached_property
     def clip_display(self) -> np.ndarray:
         """Display values in [0, 1] at the clip's exposure (float64, (H, W, 3))."""
-        return display_values(self.frame, self.clip_scale, self.curve)
+        return self.scatter(self.clip_display_lit, np.float64)
+
+    def clip_codes(self, top: int, dtype) -> np.ndarray:
+        """The clip's display values quantised to 0..``top`` (255 or 65535)."""
+        return self.scatter(np.round(self.clip_display_lit * top).astype(dtype), dtype)
 
     @cached_property
     def luminance(self) -> np.ndarray:
@@ -155,28 +180,32 @@ class _TransientVideos:
         )
         self.caption = "per-frame exposure" if cfg.per_frame_exposure else "one exposure for the clip"
         self.running: np.ndarray | None = None
+        self.running_display = np.zeros(0, np.uint8)
 
     def add(self, view: _Frame) -> None:
         cfg, k = self.cfg, view.k
         if cfg.per_frame_exposure:
             display = to_display(view.frame, exposure_scale(view.frame, cfg.exposure_percentile), cfg.tone_curve)
         else:
-            display = np.round(view.clip_display * 255).astype(np.uint8)
+            display = view.clip_codes(255, np.uint8)
         self.video.write(self.labels.video_frame(k, display, self.caption))
         if self.archival is not None:
             self.archival.write(self._archival_frame(view))
         if self.running is None:
             self.running = np.zeros(view.frame.shape)
-        self.running += view.frame
-        cumulative = to_display(self.running, self.cumulative_scale, cfg.tone_curve)
-        self.cumulative.write(self.labels.video_frame(k, cumulative, "cumulative"))
+            self.running_display = np.zeros(view.frame.shape, np.uint8)
+        # The running sum changes at this frame's lit pixels only, and so does its display.
+        running, shown = self.running.reshape(-1, 3), self.running_display.reshape(-1, 3)
+        running[view.lit] += view.frame.reshape(-1, 3)[view.lit]
+        shown[view.lit] = to_display(running[view.lit], self.cumulative_scale, cfg.tone_curve)
+        self.cumulative.write(self.labels.video_frame(k, self.running_display, "cumulative"))
 
     def _archival_frame(self, view: _Frame) -> np.ndarray:
         """The 10-bit cut: the web cut's exposure and curve, quantised to 16 bits before the encoder's 10,
         with the time label burned in (render/output/LOOK.md)."""
         cfg = self.cfg
         if view.frame.shape[0] >= cfg.video_min_height:  # not upscaled: the values the other outputs use
-            display = np.round(view.clip_display * 65535).astype(np.uint16)
+            display = view.clip_codes(65535, np.uint16)
         else:
             display = to_display(upscale(view.frame, cfg.video_min_height), view.clip_scale, cfg.tone_curve, bits=16)
         label = annotate(np.zeros((*display.shape[:2], 3), np.uint8), [self.labels.time(view.k)])
@@ -250,6 +279,9 @@ class _LightInFlight:
         self.cfg, self.out_dir, self.labels = cfg, out_dir, labels
         self.steady_display = display_values(steady, exposure_scale(steady, cfg.exposure_percentile), cfg.tone_curve)
         self.background = self.steady_display * cfg.light_in_flight_dim
+        # The screen blend where a frame has no light: the dimmed still, through the same expression.
+        self.unlit = 1 - (1 - self.background) * (1 - np.zeros_like(self.background))
+        self.unlit_codes = np.round(self.unlit * 255).astype(np.uint8)
         self.video_path = out_dir / "light_in_flight.mp4"
         self.video = files.enter_context(Mp4Writer(self.video_path, fps))
         self.moments = [int(k) for k in np.linspace(0, count - 1, 4).round().astype(int)]
@@ -257,11 +289,15 @@ class _LightInFlight:
         self.arrival = ArrivalTimes(statistics.total_luminance, film.bin_width_opl)
 
     def add(self, view: _Frame) -> None:
-        screened = 1 - (1 - self.background) * (1 - view.clip_display)
-        composed = np.round(screened * 255).astype(np.uint8)
+        background = self.background.reshape(-1, 3)[view.lit]
+        screened = 1 - (1 - background) * (1 - view.clip_display_lit)
+        composed = self.unlit_codes.copy()
+        composed.reshape(-1, 3)[view.lit] = np.round(screened * 255).astype(np.uint8)
         self.video.write(self.labels.video_frame(view.k, composed, "light in flight"))
         if view.k in self.moments:
-            self.tiles[view.k] = annotate(self._tile(screened), [self.labels.time(view.k)])
+            image = self.unlit.copy()
+            image.reshape(-1, 3)[view.lit] = screened
+            self.tiles[view.k] = annotate(self._tile(image), [self.labels.time(view.k)])
         self.arrival.add(view.k, view.luminance)
 
     @staticmethod
