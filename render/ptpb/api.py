@@ -8,11 +8,13 @@
                  "albedo": (3,), "radiance": (3,)  # one-sided area emission along the outward normal
                 }, ...],
      "point_lights": [{"position", "intensity" (W/sr), "medium"}],
-     "directional_lights": [{"to_sun", "irradiance" (W/m^2), "reference_point" or None}],
+     "directional_lights": [{"to_sun", "irradiance" (W/m^2), "reference_point" or None,
+                             "beam_radius" (m, 1/e^2; 0 uniform), "beam_center" (a point of the beam's axis)}],
      "environment_radiance": (3,),  # constant sky, steady image only
      "environment_up": (3,),  # optional: next-event estimation samples the sky's hemisphere around it
      "ambient_ior": 1.0,
-     "camera": {"origin", "target", "up", "fov" (deg), "fov_axis", "width", "height", "medium"},
+     "camera": {"origin", "target", "up", "fov" (deg), "fov_axis", "width", "height", "medium",
+                "projection": "perspective"|"orthographic", "ortho_width" (m, orthographic's film width)},
      "film": {"frame_mode": "steady"|"bins"|"gate", "temporal_bins", "start_opl" (m), "bin_width_opl" (m)}}
 
 Free flights sample the channel-average mixture of the three exponentials and carry all three

@@ -38,12 +38,15 @@ def _tan_half_fov_x(cam: dict) -> float:
 
 def _resolve_radius(spec: BeamRadius, scene: dict, centre: np.ndarray, radius: float) -> float:
     """A kernel radius in metres: absolute, a fraction of the scene radius, or pixel footprints
-    2 z tan(fov_x/2) / W at the distance z from the camera to the scene centre (render/core/DESIGN.md §6)."""
+    2 z tan(fov_x/2) / W at the distance z from the camera to the scene centre (render/core/DESIGN.md §6);
+    an orthographic camera's pixel is ortho_width / W wherever it looks."""
     if spec.unit == "m":
         return spec.value
     if spec.unit == "scene_radius":
         return spec.value * radius
     cam = scene["camera"]
+    if cam.get("projection") == "orthographic":
+        return spec.value * float(cam["ortho_width"]) / cam["width"]
     depth = float(np.linalg.norm(centre - np.asarray(cam["origin"], dtype=np.float64))) or radius
     return spec.value * 2 * depth * _tan_half_fov_x(cam) / cam["width"]
 

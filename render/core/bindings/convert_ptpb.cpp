@@ -218,6 +218,8 @@ Scene parse_scene(const py::dict& d) {
       dl.has_reference_point = true;
       dl.reference_point = vec3(l, "reference_point", {0, 0, 0}, w);
     }
+    dl.beam_radius = get<double>(l, "beam_radius", 0.0, w);
+    dl.beam_center = vec3(l, "beam_center", dl.reference_point, w);
     sc.directional_lights.push_back(dl);
   }
   sc.environment_radiance = vec3(d, "environment_radiance", {0, 0, 0}, "scene");
@@ -227,7 +229,15 @@ Scene parse_scene(const py::dict& d) {
   sc.camera.origin = vec3(cam, "origin", {0, 0, 0}, "camera");
   sc.camera.target = vec3(cam, "target", {0, 0, 1}, "camera");
   sc.camera.up = vec3(cam, "up", {0, 1, 0}, "camera");
-  sc.camera.fov_deg = require_key<double>(cam, "fov", "camera");
+  sc.camera.projection = choose<Projection>(
+      get<std::string>(cam, "projection", "perspective", "camera"),
+      {{"perspective", Projection::Perspective}, {"orthographic", Projection::Orthographic}}, "camera.projection");
+  if (sc.camera.projection == Projection::Orthographic) {
+    sc.camera.ortho_width = require_key<double>(cam, "ortho_width", "camera");
+    sc.camera.fov_deg = get<double>(cam, "fov", sc.camera.fov_deg, "camera");
+  } else {
+    sc.camera.fov_deg = require_key<double>(cam, "fov", "camera");
+  }
   sc.camera.fov_axis = get<std::string>(cam, "fov_axis", "x", "camera");
   sc.camera.width = require_key<int>(cam, "width", "camera");
   sc.camera.height = require_key<int>(cam, "height", "camera");

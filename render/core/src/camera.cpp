@@ -24,6 +24,12 @@ CameraFrame make_camera_frame(const Camera& cam) {
   f.origin = cam.origin;
   const int W = cam.width, H = cam.height;
   const double aspect = double(W) / H;
+  if (cam.projection == Projection::Orthographic) {
+    f.orthographic = true;
+    f.half_width = 0.5 * cam.ortho_width;
+    f.half_height = f.half_width / aspect;
+    return f;
+  }
   const double tan_half = std::tan(cam.fov_deg * kPi / 360.0);
   std::string axis = cam.fov_axis;
   if (axis == "smaller") axis = W <= H ? "x" : "y";
@@ -48,13 +54,17 @@ void trace_camera_path(const CameraPass& p, TileFilm& tile, int px, int py, std:
   KeyedRng rng(st.seed, p.iteration, StreamDomain::CameraPixel, pixel);
   const double jx = st.jitter ? rng.next_double() : 0.5, jy = st.jitter ? rng.next_double() : 0.5;
   const double sx = (px + jx) / W, sy = (py + jy) / H;
-  // Mitsuba's perspective sensor: +x of camera space is "left", film y points down.
+  // Mitsuba's sensors: +x of camera space is "left", film y points down. A perspective ray leaves the
+  // pinhole; an orthographic one leaves its film point on the plane through the origin, along forward.
   const CameraFrame& cam = p.camera;
-  Vec3d dir =
-      normalize(cam.left * ((1.0 - 2.0 * sx) * cam.tan_x) + cam.up * ((1.0 - 2.0 * sy) * cam.tan_y) + cam.forward);
+  Vec3d dir = cam.forward, pos = cam.origin;
+  if (cam.orthographic)
+    pos = cam.origin + cam.left * ((1.0 - 2.0 * sx) * cam.half_width) + cam.up * ((1.0 - 2.0 * sy) * cam.half_height);
+  else
+    dir = normalize(cam.left * ((1.0 - 2.0 * sx) * cam.tan_x) + cam.up * ((1.0 - 2.0 * sy) * cam.tan_y) + dir);
   const PixelSplat splat{scene.film, st.temporal_kernel, tile,
                          std::size_t(py - tile.y0) * tile.side + std::size_t(px - tile.x0)};
-  Vec3d pos = cam.origin, weight{1, 1, 1};
+  Vec3d weight{1, 1, 1};
   int medium = scene.camera.medium, depth_c = 0;
   double tau_c = 0.0;
   // A pair of a beam and this camera segment makes a path of depth >= depth_c + 2 (§3).

@@ -112,7 +112,12 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
     require(all_finite(l.to_sun) && length(l.to_sun) > 0, where + ".to_sun must be a non-zero vector");
     require(finite_nonneg(l.irradiance), where + ".irradiance must be finite and >= 0");
     require(!l.has_reference_point || all_finite(l.reference_point), where + ".reference_point must be finite");
-    lights_.push_back({2, i, kPi * sphere_radius_ * sphere_radius_ * mean(l.irradiance)});
+    require(std::isfinite(l.beam_radius) && l.beam_radius >= 0 && all_finite(l.beam_center),
+            where + ".beam_radius must be >= 0 m (0: a uniform sun) and beam_center finite");
+    // A beam's power is the Gaussian's integral, pi w^2 / 2 times its irradiance on the axis.
+    const double area =
+        l.beam_radius > 0 ? 0.5 * kPi * l.beam_radius * l.beam_radius : kPi * sphere_radius_ * sphere_radius_;
+    lights_.push_back({2, i, area * mean(l.irradiance)});
   }
   require(finite_nonneg(scene.environment_radiance), "environment_radiance must be finite and >= 0");
   require(all_finite(scene.environment_up), "environment_up must be finite (zero: sample the whole sky)");
@@ -140,7 +145,11 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
   }
   const Camera& cam = scene.camera;
   require(cam.width > 0 && cam.height > 0, "camera width and height must be > 0");
-  require(cam.fov_deg > 0 && cam.fov_deg < 180, "camera fov must lie in (0, 180) degrees");
+  if (cam.projection == Projection::Orthographic)
+    require(std::isfinite(cam.ortho_width) && cam.ortho_width > 0,
+            "camera ortho_width must be a positive width in metres for an orthographic camera");
+  else
+    require(cam.fov_deg > 0 && cam.fov_deg < 180, "camera fov must lie in (0, 180) degrees");
   require(cam.fov_axis == "x" || cam.fov_axis == "y" || cam.fov_axis == "diagonal" || cam.fov_axis == "smaller" ||
               cam.fov_axis == "larger",
           "camera fov_axis must be x, y, diagonal, smaller or larger, got '" + cam.fov_axis + "'");
@@ -228,10 +237,19 @@ bool CompiledScene::sample_emission(KeyedRng& rng, LightSample& out) const {
     const Vec3d disk_center = sphere_center_ + s * plane_offset;
     Vec3d e1, e2;
     make_frame(s, e1, e2);
-    const double r = sphere_radius_ * std::sqrt(u1), phi = 2.0 * kPi * u2;
-    out.origin = disk_center + e1 * (r * std::cos(phi)) + e2 * (r * std::sin(phi));
+    if (l.beam_radius > 0) {
+      // A Gaussian beam: its profile is a normal distribution of sigma w/2 across the axis (Box-Muller), and
+      // every photon carries the beam's power over the number drawn.
+      const Vec3d axis_on_plane = l.beam_center + s * dot(disk_center - l.beam_center, s);
+      const double r = 0.5 * l.beam_radius * std::sqrt(-2.0 * std::log1p(-u1)), phi = 2.0 * kPi * u2;
+      out.origin = axis_on_plane + e1 * (r * std::cos(phi)) + e2 * (r * std::sin(phi));
+      out.power = l.irradiance * (0.5 * kPi * l.beam_radius * l.beam_radius / pick);
+    } else {
+      const double r = sphere_radius_ * std::sqrt(u1), phi = 2.0 * kPi * u2;
+      out.origin = disk_center + e1 * (r * std::cos(phi)) + e2 * (r * std::sin(phi));
+      out.power = l.irradiance * (kPi * sphere_radius_ * sphere_radius_ / pick);
+    }
     out.direction = -s;
-    out.power = l.irradiance * (kPi * sphere_radius_ * sphere_radius_ / pick);
     out.medium = kVacuum;
     out.delta = true;
   }

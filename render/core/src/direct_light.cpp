@@ -107,7 +107,7 @@ bool CompiledScene::connect_light(KeyedRng& rng, const Vec3d& x, int medium, boo
     out.direction = s;
     const Vec3d tr =
         shadow_transmittance(x, s, std::numeric_limits<double>::infinity(), medium, from_medium, rng, opl, end);
-    out.value = l.irradiance * tr / pick;
+    out.value = l.irradiance * (l.profile(x) * tr) / pick;
     // The wavefront leaves the plane Pi_0 at tau = 0 and reaches the shadow ray's last point `end`
     // through the surroundings (DESIGN.md §1), then x through the path just traced.
     const double plane_offset = l.has_reference_point ? dot(l.reference_point - sphere_center_, s) : sphere_radius_;

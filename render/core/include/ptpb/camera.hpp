@@ -15,10 +15,13 @@
 
 namespace ptpb {
 
-// Mitsuba's look_at frame, columns (left, up, forward), and the tangents of the half field of view.
+// Mitsuba's look_at frame, columns (left, up, forward), and the tangents of the half field of view
+// (perspective) or the film's half width and height in metres (orthographic).
 struct CameraFrame {
   Vec3d origin, left, up, forward;
+  bool orthographic = false;
   double tan_x = 0.0, tan_y = 0.0;
+  double half_width = 0.0, half_height = 0.0;
 };
 
 CameraFrame make_camera_frame(const Camera& camera);

@@ -1,6 +1,7 @@
 // Plain scene description consumed by the PTPB renderer: media, shapes, lights, camera, film.
 // Everything is in metres; colours are linear RGB. Built by the Python face or by tests.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -45,19 +46,36 @@ struct PointLight {
   int medium = kVacuum;
 };
 
-// Plane wave from direction `to_sun`; the time origin is the plane Pi_0 of DESIGN.md §1.
+// Plane wave from direction `to_sun`; the time origin is the plane Pi_0 of DESIGN.md §1. With a
+// `beam_radius` w > 0 it is a collimated Gaussian beam, a laser: irradiance exp(-2 r^2 / w^2) times
+// `irradiance` at the distance r from the axis through `beam_center` along to_sun.
 struct DirectionalLight {
   Vec3d to_sun{0, 0, 1};
-  Vec3d irradiance{0, 0, 0};  // W/m^2 on a plane perpendicular to to_sun
+  Vec3d irradiance{0, 0, 0};  // W/m^2 on a plane perpendicular to to_sun (on the axis for a beam)
   bool has_reference_point = false;
   Vec3d reference_point{0, 0, 0};
+  double beam_radius = 0.0;  // 1/e^2 radius of a Gaussian beam [m]; 0: uniform
+  Vec3d beam_center{0, 0, 0};
+  // The beam's profile at p: 1 for a uniform plane wave.
+  double profile(const Vec3d& p) const {
+    if (!(beam_radius > 0)) return 1.0;
+    const Vec3d s = normalize(to_sun), d = p - beam_center;
+    const Vec3d across = d - s * dot(d, s);
+    return std::exp(-2.0 * dot(across, across) / (beam_radius * beam_radius));
+  }
 };
 
-// Mitsuba-compatible pinhole camera (look-at frame, film y downward).
+enum class Projection { Perspective, Orthographic };
+
+// Mitsuba-compatible camera (look-at frame, film y downward): a pinhole, or an orthographic receiver
+// whose parallel rays leave the plane through `origin` facing `target`; that plane is its time origin
+// (DESIGN.md §1).
 struct Camera {
   Vec3d origin{0, 0, 0}, target{0, 0, 1}, up{0, 1, 0};
+  Projection projection = Projection::Perspective;
   double fov_deg = 40.0;
   std::string fov_axis = "x";  // x | y | diagonal | smaller | larger
+  double ortho_width = 0.0;    // orthographic: the film's width in metres (its height follows the aspect)
   int width = 64, height = 64;
   int medium = kVacuum;  // medium containing the pinhole
 };
