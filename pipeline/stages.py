@@ -1,4 +1,5 @@
-"""The pipeline's stages, in order: geometry -> scene -> reference, render -> composite -> compare.
+"""The pipeline's stages, in order: geometry -> scene -> reference, render -> composite -> compare, and
+geometry -> lidar for a laser altimeter's run (``lidar.enabled``), which renders no camera view.
 
 Each stage is a plain function of a StageContext that calls one function of geometry/ or render/.
 Heavy modules are imported inside the functions so that `python -m pipeline validate` stays fast.
@@ -19,7 +20,14 @@ def geometry_stage(ctx: StageContext) -> dict:
 
 
 def _uses_penitentes(config) -> bool:
+    if config.lidar.enabled:
+        return config.lidar.target == "penitentes"
     return any(o.shape == "penitentes" for o in config.scene.objects)
+
+
+def _views(config) -> bool:
+    """The camera's chain (scene -> compare) runs unless the run is a lidar shot."""
+    return not config.lidar.enabled
 
 
 def scene_stage(ctx: StageContext) -> dict:
@@ -104,6 +112,15 @@ def composite_stage(ctx: StageContext) -> dict:
     return run_composite_stage(ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"], cfg, ctx.out_dir)
 
 
+def lidar_stage(ctx: StageContext) -> dict:
+    from render.lidar.stage import run_lidar_stage
+
+    c = ctx.config
+    return run_lidar_stage(
+        c.lidar, ctx.out_dir, geometry_dir=ctx.inputs.get("geometry"), seed=c.seed, threads=c.threads, quiet=ctx.quiet
+    )
+
+
 def compare_stage(ctx: StageContext) -> dict:
     from render.output.compare import run_compare_stage
 
@@ -132,6 +149,7 @@ STAGES: list[Stage] = [
         ("scene", "geometry.latitude", "geometry.start_day_of_year", "geometry.days"),
         upstream=("geometry",),
         description="the neutral scene description, meshes and the media's optical quantities",
+        enabled=_views,
     ),
     Stage(
         "reference",
@@ -139,7 +157,7 @@ STAGES: list[Stage] = [
         ("reference", "seed"),
         upstream=("scene",),
         description="Mitsuba 3 volpath steady image and mitransient frames",
-        enabled=lambda c: c.reference.steady or c.reference.transient,
+        enabled=lambda c: _views(c) and (c.reference.steady or c.reference.transient),
         writes=reference_writes,
     ),
     Stage(
@@ -148,6 +166,7 @@ STAGES: list[Stage] = [
         ("render", "seed", "threads", "scene.max_depth", "scene.rr_depth"),
         upstream=("scene",),
         description="our PTPB render: steady image, frames and statistics",
+        enabled=_views,
         writes=render_writes,
     ),
     Stage(
@@ -156,6 +175,7 @@ STAGES: list[Stage] = [
         ("composite", "geometry.latitude", "geometry.start_day_of_year", "geometry.days", "scene.sun"),
         upstream=("render", "reference", "scene"),
         description="transient videos, streak images, ours against the reference",
+        enabled=_views,
     ),
     Stage(
         "compare",
@@ -163,5 +183,14 @@ STAGES: list[Stage] = [
         ("composite",),
         upstream=("render", "reference", "composite"),
         description="comparison table, error-against-time plot and report.html",
+        enabled=_views,
+    ),
+    Stage(
+        "lidar",
+        lidar_stage,
+        ("lidar", "seed", "threads"),
+        upstream=("geometry",),
+        description="a laser altimeter's waveform over the field, its ranges and their biases",
+        enabled=lambda c: c.lidar.enabled,
     ),
 ]

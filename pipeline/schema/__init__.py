@@ -9,6 +9,7 @@ from pydantic import Field, SerializationInfo, SerializerFunctionWrapHandler, fi
 from pipeline.schema.base import StrictModel
 from pipeline.schema.composite import CompositeConfig
 from pipeline.schema.geometry import GeometryConfig
+from pipeline.schema.lidar import LidarConfig
 from pipeline.schema.ptpb import PTPBConfig
 from pipeline.schema.scene import ReferenceConfig, SceneConfig
 
@@ -51,6 +52,10 @@ class Config(StrictModel):
     composite: CompositeConfig = Field(
         default_factory=CompositeConfig,
         description="The composite and compare stages: videos, streaks, figures, tables.",
+    )
+    lidar: LidarConfig = Field(
+        default_factory=LidarConfig,
+        description="The lidar stage: a laser altimeter's waveform and range biases over the field.",
     )
 
     def render_settings(self) -> PTPBConfig:

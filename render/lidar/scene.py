@@ -1,0 +1,145 @@
+"""The scene of one lidar shot for the PTPB core (render/lidar/LIDAR.md §7.1).
+
+Transport in index-matched snow is reciprocal, so the shot is rendered backwards: the receiver, which
+sees the whole footprint with a uniform response, becomes a plane wave from its direction (a sun of unit
+irradiance pinned to the reference plane), and the laser becomes an orthographic camera over the
+footprint, looking along the beam. A pixel then holds the light that a pencil of the laser at that
+point returns to the receiver, and the footprint's Gaussian weights the pixels afterwards
+(``receiver_weights``), so one render serves any footprint that fits on its film. Both time origins lie
+on the reference plane z = ``reference_height``: light turned back at depth d below it arrives at OPL
+2d, range d.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from render.scene.shapes import box_mesh
+
+Target = Literal["penitentes", "flat_snow", "bare"]
+
+
+@dataclass(frozen=True)
+class Receiver:
+    """The film of a shot: ``pixels`` x ``pixels`` over a square of side ``side`` [m] centred at ``centre``
+    (x, y) on the reference plane z = ``reference_height``; bins of ``bin_width_opl`` [m] from OPL 0."""
+
+    centre: tuple[float, float]
+    side: float
+    pixels: int
+    reference_height: float
+    bin_width_opl: float
+    temporal_bins: int
+
+    def pixel_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """World x (columns, growing with the column) and y (rows, falling with the row) of pixel centres."""
+        offsets = ((np.arange(self.pixels) + 0.5) / self.pixels - 0.5) * self.side
+        return self.centre[0] + offsets, self.centre[1] - offsets
+
+    def camera(self) -> dict[str, Any]:
+        """The laser, reversed: an orthographic camera looking straight down from the reference plane."""
+        cx, cy, z = self.centre[0], self.centre[1], self.reference_height
+        return {
+            "origin": (cx, cy, z),
+            "target": (cx, cy, z - 1.0),
+            "up": (0.0, 1.0, 0.0),
+            "projection": "orthographic",
+            "ortho_width": self.side,
+            "width": self.pixels,
+            "height": self.pixels,
+        }
+
+    def receiver_light(self) -> dict[str, Any]:
+        """The receiver, reversed: a zenith plane wave of unit irradiance whose tau = 0 plane is the reference
+        plane."""
+        cx, cy, z = self.centre[0], self.centre[1], self.reference_height
+        return {"to_sun": (0.0, 0.0, 1.0), "irradiance": (1.0, 1.0, 1.0), "reference_point": (cx, cy, z)}
+
+    def film(self) -> dict[str, Any]:
+        return {
+            "frame_mode": "bins",
+            "temporal_bins": self.temporal_bins,
+            "start_opl": 0.0,
+            "bin_width_opl": self.bin_width_opl,
+        }
+
+
+def receiver_weights(receiver: Receiver, diameter: float, centre: tuple[float, float] | None = None) -> np.ndarray:
+    """A Gaussian footprint of 1/e² ``diameter`` [m] (irradiance ∝ exp(-8 r²/D²)) at the receiver's pixel
+    centres, normalised to sum to 1: (pixels, pixels), rows as the film's. Refuses a footprint whose 1/e²
+    circle leaves the film (its weight there would be lost)."""
+    if not diameter > 0:
+        raise ValueError(f"lidar footprint diameter must be positive, got {diameter} m")
+    cx, cy = receiver.centre if centre is None else centre
+    reach = max(abs(cx - receiver.centre[0]), abs(cy - receiver.centre[1])) + diameter / 2
+    if reach > receiver.side / 2:
+        raise ValueError(
+            f"a footprint of {diameter} m at {(cx, cy)} reaches {reach:.3g} m from the film's centre, beyond its "
+            f"half side {receiver.side / 2:.3g} m; widen the receiver film (lidar.film_side_footprints)"
+        )
+    xs, ys = receiver.pixel_centres()
+    r2 = (xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2
+    w = np.exp(-8.0 * r2 / diameter**2)
+    return w / w.sum()
+
+
+def medium(sigma_s: Sequence[float], sigma_a: Sequence[float], g: float) -> dict[str, Any]:
+    """An index-matched medium of the core with per-channel coefficients [1/m] (three of each)."""
+    if len(sigma_s) != 3 or len(sigma_a) != 3:
+        raise ValueError(f"a medium needs three sigma_s and three sigma_a, got {sigma_s} and {sigma_a}")
+    return {"sigma_s": tuple(map(float, sigma_s)), "sigma_a": tuple(map(float, sigma_a)), "g": float(g), "ior": 1.0}
+
+
+def shot_scene(
+    target: Target,
+    receiver: Receiver,
+    *,
+    snow: dict[str, Any] | None = None,
+    mesh: tuple[np.ndarray, np.ndarray] | None = None,
+    bare_albedo: float = 0.5,
+    depth: float = 2.0,
+) -> dict[str, Any]:
+    """The core dict of a shot at ``target``: the grown field's solid ``mesh`` filled with ``snow`` (a medium
+    dict), flat snow (a box ``depth`` deep under z = 0, twice the film's side wide) or a bare Lambertian
+    surface of albedo ``bare_albedo`` at z = 0."""
+    half = receiver.side
+    cx, cy = receiver.centre
+    if target == "penitentes":
+        if mesh is None or snow is None:
+            raise ValueError("a penitente shot needs the field's mesh and the snow medium")
+        vertices, faces = mesh
+        shape = {"vertices": vertices, "faces": faces, "kind": "null", "interior": 0, "exterior": -1}
+        media = [snow]
+    elif target == "flat_snow":
+        if snow is None:
+            raise ValueError("a flat-snow shot needs the snow medium")
+        v, f = box_mesh((cx - half, cy - half, -depth), (cx + half, cy + half, 0.0))
+        shape = {"vertices": v, "faces": f, "kind": "null", "interior": 0, "exterior": -1}
+        media = [snow]
+    elif target == "bare":
+        if not 0 < bare_albedo <= 1:
+            raise ValueError(f"lidar.bare_albedo must lie in (0, 1], got {bare_albedo}")
+        v, f = box_mesh((cx - half, cy - half, -depth), (cx + half, cy + half, 0.0))
+        shape = {"vertices": v, "faces": f, "kind": "diffuse", "albedo": (bare_albedo,) * 3}
+        media = []
+    else:
+        raise ValueError(f"unknown lidar target '{target}': use penitentes, flat_snow or bare")
+    return {
+        "media": media,
+        "shapes": [shape],
+        "directional_lights": [receiver.receiver_light()],
+        "camera": receiver.camera(),
+        "film": receiver.film(),
+    }
+
+
+def bins_for(opl_span: float, bin_width_opl: float) -> int:
+    """The number of bins of ``bin_width_opl`` that cover ``opl_span`` [m]."""
+    if not bin_width_opl > 0:
+        raise ValueError(f"bin width must be positive, got {bin_width_opl} m")
+    return max(1, math.ceil(opl_span / bin_width_opl))

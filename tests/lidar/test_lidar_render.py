@@ -1,0 +1,295 @@
+"""The lidar shot rendered by our core (render/lidar/LIDAR.md): the orthographic receiver against the exact
+half-space, a bare surface's zero bias and a tilted one's broadening, and the time-resolved reflectance of
+flat index-matched snow against diffusion theory."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "ptpb"))
+from halfspace import reflected_radiance  # noqa: E402
+
+from render.lidar import diffusion  # noqa: E402
+from render.lidar.scene import Receiver, medium, receiver_weights, shot_scene  # noqa: E402
+from render.lidar.waveform import convolve_pulse, estimate_ranges, pulse_sigma_opl  # noqa: E402
+from render.ptpb.api import render  # noqa: E402
+from render.scene.shapes import box_mesh  # noqa: E402
+
+
+def settings(**kw) -> dict:
+    base = {"iterations": 8, "frame_mode": "bins", "max_depth": -1, "medium_estimator": "paths", "seed": 1}
+    base.update(kw)
+    return base
+
+
+def grey(sigma_s: float, sigma_a: float) -> dict:
+    return medium((sigma_s,) * 3, (sigma_a,) * 3, 0.0)
+
+
+def test_orthographic_receiver_sees_the_exact_half_space():
+    """A nadir orthographic camera under a zenith sun: each pixel is Chandrasekhar's L(1; 1) = w H(1)^2 / (8 pi)
+    exactly (no spread of view angles, unlike a pinhole), and the frames, early and late parts sum to it."""
+    albedo = 0.9995
+    receiver = Receiver((0.0, 0.0), 0.2, 8, 0.05, 0.004, 400)
+    scene = shot_scene("flat_snow", receiver, snow=grey(2000 * albedo, 2000 * (1 - albedo)), depth=1.0)
+    r = render(scene, settings(iterations=1, time_budget_s=4))
+    expected = float(reflected_radiance(albedo, np.array([1.0]), 1.0)[0])
+    ratio = r.steady.mean() / expected
+    parts = (r.frames.sum(axis=0) + r.early + r.late).mean() / r.steady.mean()
+    print(f"orthographic / Chandrasekhar {ratio:.4f}; frames + early + late / steady {parts:.6f}")
+    assert abs(ratio - 1) < 0.015
+    assert parts == pytest.approx(1.0, rel=1e-4)
+    assert r.early.max() == 0  # nothing arrives before light can reach the surface and come back
+
+
+def test_a_bare_surface_returns_the_pulse_with_zero_bias():
+    """An opaque Lambertian plane 3.05 cm below the reference plane: the whole return sits in one bin (its
+    round trip falls on the centre of bin 30 of 2 mm), its radiance is albedo / pi, and every estimator on the
+    pulsed waveform gives the plane's range within a tenth of a bin."""
+    width, depth_bins = 0.002, 30.5
+    z_ref = depth_bins * width / 2  # the round trip 2 z_ref is 30.5 bins of OPL
+    receiver = Receiver((0.0, 0.0), 0.5, 4, z_ref, width, 160)
+    r = render(shot_scene("bare", receiver, bare_albedo=0.6, depth=0.1), settings(iterations=8))
+    waveform = r.frames.mean(axis=(1, 2))[:, 1]
+    print(
+        f"bare plane: pi x waveform sum / albedo {math.pi * waveform.sum() / 0.6:.4f}, bins lit {np.count_nonzero(waveform)}"
+    )
+    # A diffuse surface is estimated by surface photons (render/core/DESIGN.md §7): a density estimate.
+    assert waveform.sum() == pytest.approx(0.6 / math.pi, rel=0.01)
+    assert np.count_nonzero(waveform) == 1
+    pulsed = convolve_pulse(waveform, width, 0.1)  # a 3 cm (OPL) pulse on 2 mm bins
+    estimates = estimate_ranges(pulsed, 0.0, width, pulse_fwhm_ns=0.1, strict=True)
+    for name, value in estimates.ranges().items():
+        assert abs(value - z_ref) < 0.1 * width / 2, name
+
+
+def test_a_tilted_surface_broadens_the_return_by_the_footprints_height_spread():
+    """A bare plane tilted by 20 degrees under a Gaussian footprint of 1/e^2 diameter D: heights under it spread
+    with standard deviation tan(20) D / 4, so the pulsed return's variance in range is the pulse's plus that
+    spread's squared (the radiance is the same everywhere on the plane: albedo cos(20) / pi)."""
+    tilt, diameter = math.radians(20.0), 0.4
+    receiver = Receiver((0.0, 0.0), 2.0 * diameter, 96, 0.3, 0.002, 500)
+    v, f = box_mesh((-1.0, -1.0, -0.2), (1.0, 1.0, 0.0))
+    c, s = math.cos(tilt), math.sin(tilt)
+    v = v @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]).T  # about y: the top's height is -x tan(tilt)
+    scene = shot_scene("bare", receiver, bare_albedo=0.5)
+    scene["shapes"][0].update(vertices=v.astype(np.float32), faces=f)
+    r = render(scene, settings(iterations=16, light_paths_per_iteration=200_000))  # surface photons: 0.4 % off
+    weights = receiver_weights(receiver, diameter)
+    impulse = np.einsum("thw,hw->t", r.frames[..., 1].astype(np.float64), weights)
+    assert impulse.sum() == pytest.approx(0.5 * math.cos(tilt) / math.pi, rel=0.01)
+    fwhm_ns = 0.2
+    pulsed = convolve_pulse(impulse, receiver.bin_width_opl, fwhm_ns)
+    estimates = estimate_ranges(pulsed, 0.0, receiver.bin_width_opl, pulse_fwhm_ns=fwhm_ns, strict=True)
+    spread = math.tan(tilt) * diameter / 4
+    pulse = pulse_sigma_opl(fwhm_ns) / 2
+    bins = receiver.bin_width_opl / 2 / math.sqrt(12)  # the bins' own width, in range
+    expected = math.sqrt(pulse**2 + spread**2 + bins**2)
+    print(f"rms width {estimates.rms_width:.5f} m, expected {expected:.5f} m (spread {spread:.5f}, pulse {pulse:.5f})")
+    assert estimates.rms_width == pytest.approx(expected, rel=0.03)
+    assert estimates.centroid == pytest.approx(receiver.reference_height, abs=1e-3)
+
+
+# ------------------------------------------------------------------ flat snow against transport and diffusion
+
+ELL = 0.003  # transport mean free path l* [m]
+# sigma_a / sigma_s' = 1.5e-3, and e^(-sigma_a L) ends the tail inside the film: beyond its 10 m of path lies
+# 2e-5 of the return (snow's 0.02 per m would need some 200 m to hold the mean path).
+SIGMA_A = 0.5
+SURFACE_OPL = 0.01
+
+
+def diffusion_shot(seconds: float, seed: int = 1):
+    """Flat isotropic snow, sigma_s' = 1/l*, under the orthographic receiver: every pixel is the area integral
+    of a pencil beam's nadir radiance (reciprocity), bins of 5 mm OPL over 10 m of path; the pixels are
+    samples. The reference plane stands 5 mm above the snow (a ray cannot start on the face it would cross),
+    so the light that turns back at once arrives at OPL 1 cm (``SURFACE_OPL``)."""
+    receiver = Receiver((0.0, 0.0), 0.3, 8, SURFACE_OPL / 2, 0.005, 2002)
+    scene = shot_scene("flat_snow", receiver, snow=grey(1 / ELL, SIGMA_A), depth=1.0)
+    return render(scene, settings(iterations=1, time_budget_s=seconds, seed=seed)), receiver
+
+
+@pytest.fixture(scope="module")
+def diffusion_render():
+    return diffusion_shot(30.0)
+
+
+def exact_nadir_mean_path(sigma_s: float, sigma_a: float) -> float:
+    """The mean in-snow path of the light an isotropic half-space returns along the normal under normal
+    incidence, from exact transport: R(sigma_a) = integral of R_0(L) e^(-sigma_a L) dL, so <L> = -d ln R / d sigma_a,
+    with R = w H(1)^2 / (8 pi) (Chandrasekhar; render/lidar/LIDAR.md §7.5)."""
+    from halfspace import chandrasekhar_h
+
+    def log_radiance(a: float) -> float:
+        albedo = sigma_s / (sigma_s + a)
+        return math.log(albedo * float(chandrasekhar_h(albedo, nodes=800)(np.array(1.0))) ** 2)
+
+    h = 1e-3 * sigma_a
+    return -(log_radiance(sigma_a + h) - log_radiance(sigma_a - h)) / (2 * h)
+
+
+def p1_nadir_mean_path(medium: diffusion.DiffusionMedium) -> float:
+    """The mean path of the area-integrated P1 radiance along the normal, (Phi + 3 R) / (4 pi) (LIDAR.md §3.3)."""
+    from scipy.integrate import quad
+
+    def nadir(path: float) -> float:
+        return float(diffusion.total_fluence(medium, path) + 3 * diffusion.total_reflectance(medium, path))
+
+    return quad(lambda path: path * nadir(path), 0, np.inf, limit=400)[0] / quad(nadir, 0, np.inf, limit=400)[0]
+
+
+@pytest.mark.slow
+def test_area_integrated_return_has_the_diffusion_tail():
+    """Past some hundred l* of path, ln R(L) falls as -3/(2L) - sigma_a: fit the power and sigma_a over
+    0.3-2 m of path (100-700 l*), where the extrapolated-boundary dipole itself fits -1.48 and 0.508. The tail
+    is noisy: at 30 s the fitted sigma_a scattered over 0.48-0.61 between seeds and windows, so this runs 120 s."""
+    r, receiver = diffusion_shot(120.0)
+    energy = r.frames.mean(axis=(1, 2, 3)).astype(np.float64)
+    path = (np.arange(receiver.temporal_bins) + 0.5) * receiver.bin_width_opl - SURFACE_OPL
+    fit = (path > 0.3) & (path < 2.0)
+    design = np.stack([np.ones(fit.sum()), np.log(path[fit]), path[fit]], axis=1)
+    medium = diffusion.DiffusionMedium(1 / ELL, SIGMA_A)
+    theory = diffusion.total_reflectance(medium, path[fit])
+    (_, power, slope), *_ = np.linalg.lstsq(design, np.log(energy[fit]), rcond=None)
+    (_, d_power, d_slope), *_ = np.linalg.lstsq(design, np.log(theory), rcond=None)
+    print(f"power {power:.3f} (dipole {d_power:.3f}), sigma_a {-slope:.3f} (dipole {-d_slope:.3f}, true {SIGMA_A})")
+    assert abs(power + 1.5) < 0.1
+    assert abs(-slope / SIGMA_A - 1) < 0.05
+
+
+def test_area_integrated_return_has_the_exact_mean_path_and_total(diffusion_render):
+    """The mean in-snow path of the light returned along the normal against exact transport (Chandrasekhar's
+    H-function differentiated in sigma_a), within 1.5 %, and the time-integrated return against Chandrasekhar's
+    value, within 2 %. Diffusion's P1 radiance puts that mean 15 % short (LIDAR.md §7.5): its closed form is
+    right for the flux over all directions, which exact transport reproduces within 0.6 %."""
+    r, receiver = diffusion_render
+    energy = r.frames.mean(axis=(1, 2, 3)).astype(np.float64)
+    path = (np.arange(receiver.temporal_bins) + 0.5) * receiver.bin_width_opl - SURFACE_OPL
+    late = r.late.mean() / (energy.sum() + r.late.mean())
+    mean = float((energy * path).sum() / energy.sum())
+    exact = exact_nadir_mean_path(1 / ELL, SIGMA_A)
+    medium = diffusion.DiffusionMedium(1 / ELL, SIGMA_A)
+    albedo = (1 / ELL) / (1 / ELL + SIGMA_A)
+    total = float((r.frames.sum(axis=0) + r.early + r.late).mean())
+    steady = float(reflected_radiance(albedo, np.array([1.0]), 1.0)[0])
+    print(
+        f"mean path {mean:.5f} m: exact transport {exact:.5f} m, P1 diffusion {p1_nadir_mean_path(medium):.5f} m; "
+        f"late fraction {late:.2e}; total / Chandrasekhar {total / steady:.4f}; {r.stats['iterations']} iterations"
+    )
+    assert late < 1e-3
+    assert mean == pytest.approx(exact, rel=0.015)
+    assert total == pytest.approx(steady, rel=0.02)
+
+
+def test_a_gaussian_beam_lights_its_profile():
+    """The forward shot's laser (render/lidar/LIDAR.md §7.1): a collimated Gaussian beam of 1/e^2 radius 5 cm
+    on a Lambertian plane of albedo 0.8. The plane's radiance is 0.8 / pi exp(-2 r^2 / w^2), so the image
+    integrates to 0.8 / pi times the beam's power pi w^2 / 2 (within 2 %), a fit of that Gaussian gives w within
+    5 % (the surface photons' kernel widens it by a few per cent), and nothing lights the plane beyond 3 w."""
+    w = 0.05
+    receiver = Receiver((0.0, 0.0), 0.4, 48, 0.1, 0.01, 40)
+    scene = shot_scene("bare", receiver, bare_albedo=0.8, depth=0.1)
+    scene["directional_lights"][0].update(beam_radius=w, beam_center=(0.0, 0.0, 0.0))
+    image = render(scene, settings(iterations=32, light_paths_per_iteration=100_000)).steady[..., 1].astype(np.float64)
+    xs, ys = receiver.pixel_centres()
+    r2 = xs[None, :] ** 2 + ys[:, None] ** 2
+    inside = r2 < (1.5 * w) ** 2
+    # ln image = ln peak - 2 r^2 / w^2 over the bright disk.
+    design = np.stack([np.ones(inside.sum()), r2[inside]], axis=1)
+    (log_peak, slope), *_ = np.linalg.lstsq(design, np.log(image[inside]), rcond=None)
+    fitted_w = math.sqrt(-2 / slope)
+    print(f"beam radius {fitted_w:.4f} m ({w}), peak x pi / albedo {math.exp(log_peak) * math.pi / 0.8:.4f}")
+    power = image.sum() * (receiver.side / receiver.pixels) ** 2
+    print(f"integrated radiance x pi / albedo / beam power {power * math.pi / 0.8 / (math.pi * w * w / 2):.4f}")
+    assert fitted_w == pytest.approx(w, rel=0.05)
+    assert power == pytest.approx(0.8 / math.pi * math.pi * w * w / 2, rel=0.02)
+    assert image[r2 > (3 * w + 0.02) ** 2].max() < 1e-3 * image.max()
+
+
+def mitransient_flat_snow(receiver: Receiver, sigma_s: float, sigma_a: float, spp: int, seed: int) -> np.ndarray:
+    """``receiver``'s shot over flat grey snow in mitransient (transient_prbvolpath, millimetres): Mitsuba's
+    orthographic sensor and, for the receiver, a far disk of 0.1 degree (its directional emitter times every
+    sun path from 2 R_s behind the vertex, not from a plane, render/mitsuba/export.py). The disk stands 100 m
+    above the reference plane, so its light is 100 m + its mean excess path later than ours, and the sensor's
+    rays leave its near plane: both shift the window. Returns the frames (T, H, W, 3) of bin integrals."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("llvm_ad_rgb")
+    import mitransient  # noqa: F401  (registers its plugins)
+
+    units, height, alpha = 1000.0, 100.0, math.radians(0.1)
+    T = mi.ScalarTransform4f
+    z = receiver.reference_height
+    half = receiver.side / 2
+    disk_radius = height * math.tan(alpha)
+    near = 1e-4
+    shift = height - z + disk_radius**2 / (4 * height) - near
+    scene = {
+        "type": "scene",
+        "integrator": {"type": "transient_prbvolpath", "max_depth": -1, "rr_depth": 100000, "camera_unwarp": False},
+        "sensor": {
+            "type": "orthographic",
+            "near_clip": near * units,
+            "to_world": T().look_at(origin=[0, 0, z * units], target=[0, 0, (z - 1) * units], up=[0, 1, 0])
+            @ T().scale([half * units, half * units, 1.0]),
+            "film": {
+                "type": "transient_hdr_film",
+                "width": receiver.pixels,
+                "height": receiver.pixels,
+                "rfilter": {"type": "box"},
+                "temporal_bins": receiver.temporal_bins,
+                "start_opl": shift * units,
+                "bin_width_opl": receiver.bin_width_opl * units,
+            },
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+        "slab": {
+            "type": "cube",
+            "to_world": T().translate([0, 0, -0.5 * units]) @ T().scale([0.5 * units, 0.5 * units, 0.5 * units]),
+            "bsdf": {"type": "null"},
+            "interior": {
+                "type": "homogeneous",
+                "scale": (sigma_s + sigma_a) / units,
+                "sigma_t": {"type": "rgb", "value": [1.0] * 3},
+                "albedo": {"type": "rgb", "value": [sigma_s / (sigma_s + sigma_a)] * 3},
+                "phase": {"type": "isotropic"},
+            },
+        },
+        "sun": {
+            "type": "disk",
+            "to_world": T().translate([0, 0, height * units])
+            @ T().scale(disk_radius * units)
+            @ T().rotate([1, 0, 0], 180),
+            "emitter": {
+                "type": "area",
+                "radiance": {"type": "rgb", "value": [1 / (math.pi * math.sin(alpha) ** 2)] * 3},
+            },
+        },
+    }
+    _, transient = mi.render(mi.load_dict(scene), spp=spp, seed=seed)
+    return np.moveaxis(np.asarray(transient, dtype=np.float64)[..., :3], 2, 0)  # (H, W, T, C) -> (T, H, W, C)
+
+
+@pytest.mark.mitsuba
+@pytest.mark.slow
+def test_flat_snow_waveform_against_mitransient():
+    """The same shot in mitransient and ours, flat snow with l* = 3 mm: the area-integrated waveform agrees per
+    bin within 3 % over the bins that hold more than 1 % of the energy."""
+    receiver = Receiver((0.0, 0.0), 0.1, 4, SURFACE_OPL / 2, 0.002, 300)
+    sigma_s, sigma_a = 1 / ELL, SIGMA_A
+    ours = render(
+        shot_scene("flat_snow", receiver, snow=grey(sigma_s, sigma_a), depth=0.5),
+        settings(iterations=1, time_budget_s=20.0),
+    ).frames.mean(axis=(1, 2, 3))
+    theirs = np.mean(
+        [mitransient_flat_snow(receiver, sigma_s, sigma_a, 4096, s).mean(axis=(1, 2, 3)) for s in range(2)], axis=0
+    )
+    use = theirs > 0.01 * theirs.sum()
+    ratio = ours[use] / theirs[use]
+    print(f"{use.sum()} bins over 1 % of the energy: ours / mitransient {ratio.min():.3f}-{ratio.max():.3f}")
+    assert use.sum() >= 3
+    assert np.all(np.abs(ratio - 1) < 0.03)

@@ -1,0 +1,80 @@
+"""The lidar stage in the pipeline (render/lidar/LIDAR.md §7.4): which stages a lidar run runs, its config's
+errors, and a shot at a bare plane and at flat snow through the runner, with the files and figures it
+writes."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.config import ConfigError, load_config
+from pipeline.runner import run_stages
+from pipeline.stages import STAGES
+
+
+def lidar_config(tmp_path, name: str, **lidar) -> object:
+    settings = {"enabled": True, "footprint_diameter": 0.2, "pixels": 16, "iterations": 4, "tail_range": 0.1}
+    settings.update(lidar)
+    body = "\n".join(f"  {k}: {v}" for k, v in settings.items())
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(f"name: {name}\nruns_dir: {tmp_path / 'runs'}\nthreads: 2\nlidar:\n{body}\n")
+    return load_config(path)
+
+
+def test_a_lidar_run_runs_geometry_and_lidar_only(tmp_path):
+    cfg = lidar_config(tmp_path, "shot", target="penitentes")
+    enabled = [s.name for s in STAGES if s.enabled(cfg)]
+    assert enabled == ["geometry", "lidar"]
+    flat = lidar_config(tmp_path, "flat", target="flat_snow")
+    assert [s.name for s in STAGES if s.enabled(flat)] == ["lidar"]
+
+
+def test_a_range_bin_that_cannot_resolve_the_pulse_is_refused_by_name(tmp_path):
+    with pytest.raises(ConfigError, match=r"lidar.range_bin .* use at most"):
+        lidar_config(tmp_path, "coarse", range_bin=0.1)
+    with pytest.raises(ConfigError, match="lidar.density"):
+        lidar_config(tmp_path, "dense", density=950.0)
+
+
+def test_a_bare_plane_reads_zero_bias_through_the_stage(tmp_path):
+    """A Lambertian plane of albedo 0.5: apparent reflectance 0.5 in every channel (within 2 %: a diffuse
+    surface is a surface-photon density estimate), and every estimator within a fifth of a range bin of the
+    plane (the reference plane stands 0.1 m above it)."""
+    cfg = lidar_config(tmp_path, "bare", target="bare", bare_albedo=0.5, iterations=32)
+    results = run_stages(cfg, STAGES, quiet=True)
+    assert {r.name: r.status for r in results}["lidar"] == "ran"
+    out = tmp_path / "runs" / "bare" / "lidar"
+    summary = json.loads((out / "summary.json").read_text())
+    for channel in summary["channels"]:
+        assert channel["apparent_reflectance"] == pytest.approx(0.5, rel=0.02)
+        for estimator, by_reference in channel["bias_m"].items():
+            assert abs(by_reference["flat_equivalent"]) < 0.2 * cfg.lidar.range_bin, estimator
+    rows = list(csv.DictReader((out / "biases.csv").open()))
+    assert len(rows) == 3 * 5 * 3  # channels x estimators x references
+    data = np.load(out / "waveform.npz")
+    assert data["impulse"].shape == data["pulsed"].shape == (len(data["range_m"]), 3)
+    assert (out / "waveform.png").stat().st_size > 10_000
+
+
+def test_flat_snow_reads_late_and_1064_nm_less_late(tmp_path):
+    """Flat snow of 300 kg/m3 and 0.5 mm grains: every estimator places the surface below the plane (positive
+    bias), the centroid more than the first return, and 1064 nm (ice absorbs 640x more) less than 532 nm; the
+    apparent reflectance at 532 nm is close to 1 and at 1064 nm well below it."""
+    cfg = lidar_config(
+        tmp_path, "flat", target="flat_snow", density=300.0, optical_diameter=0.0005, tail_range=1.0, iterations=16
+    )
+    run_stages(cfg, STAGES, quiet=True)
+    summary = json.loads((tmp_path / "runs" / "flat" / "lidar" / "summary.json").read_text())
+    green, picard, infrared = summary["channels"]
+    for channel in (green, picard):
+        bias = {k: v["flat_equivalent"] for k, v in channel["bias_m"].items()}
+        assert all(v > 0 for v in bias.values()), bias
+        assert bias["centroid"] > bias["first_return"]
+    assert infrared["bias_m"]["centroid"]["flat_equivalent"] < green["bias_m"]["centroid"]["flat_equivalent"]
+    assert green["apparent_reflectance"] > 0.9
+    assert infrared["apparent_reflectance"] < 0.8 * green["apparent_reflectance"]
+    assert not math.isnan(green["estimates"]["gaussian_fit"])
