@@ -192,6 +192,7 @@ def _lidar(cfg, out_dir: Path, geometry_dir: Path | None, seed: int, threads: in
     _write_biases(out_dir, channels)
     _plot(out_dir / "waveform.png", ranges, pulsed, channels, references, receiver, cfg)
     summary = {
+        "config": cfg.model_dump(),
         "target": cfg.target,
         "reference_height_m": receiver.reference_height,
         "reference_heights_m": references.to_dict(),
