@@ -7,7 +7,8 @@ airborne (1 m) footprints (render/lidar/LIDAR.md §7).
 Every point is a lidar run of `configs/lidar/icesat2.yaml` with overrides. The penitente points share one
 run folder, so the field grows once (the geometry stage's manifest matches) and only the lidar stage runs
 again; each point's lidar folder is copied under --out/<point>/lidar, and render.lidar.table writes
-biases.csv / biases.md there.
+biases.csv / biases.md there. A bare Lambertian plane is shot too, and waveforms.png shows the 532 nm
+pulsed waveforms of the bare plane, flat snow and the grown field (1 mm grains, 550 kg/m3, ICESat-2).
 """
 
 from __future__ import annotations
@@ -44,6 +45,32 @@ def points() -> list[tuple[str, list[str]]]:
     return out
 
 
+def plot_waveforms(folders: dict[str, Path], path: Path) -> None:
+    """The 532 nm (Warren & Brandt) pulsed waveforms of ``folders`` (label -> point folder) against the height
+    of the return, each normalised to its peak."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=150)
+    for label, folder in folders.items():
+        with np.load(folder / "lidar" / "waveform.npz") as data:
+            height = float(data["reference_height"]) - data["range_m"]
+            pulsed = data["pulsed"][:, 0]
+        ax.plot(height, pulsed / pulsed.max(), label=label, lw=1.3)
+    ax.axvline(0.0, color="0.5", ls=":", lw=0.8)
+    ax.set_xlim(-1.5, 1.2)
+    ax.set_xlabel("height of the return above the flat-equivalent surface [m]")
+    ax.set_ylabel("pulsed waveform / its peak")
+    ax.set_title("532 nm, 1.5 ns pulse: bare plane, flat snow and penitentes (11 m footprint)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/lidar"))
@@ -61,6 +88,18 @@ def main() -> None:
         print(f"{name}: {time.perf_counter() - t0:.1f} s", flush=True)
     write_table([row for run in runs for row in rows_of(run)], args.out)
     print(f"table: {args.out}/biases.md")
+    bare = load_config(CONFIG, ["lidar.target=bare", "name=lidar_bare"])
+    run_stages(bare, STAGES, quiet=True)
+    shutil.copytree(Path(bare.runs_dir) / bare.name / "lidar", args.out / "bare" / "lidar", dirs_exist_ok=True)
+    plot_waveforms(
+        {
+            "bare Lambertian plane": args.out / "bare",
+            "flat snow": args.out / "flat_d1mm_rho550",
+            "penitentes (demo field)": args.out / "penitentes_icesat2_d1mm_rho550",
+        },
+        args.out / "waveforms.png",
+    )
+    print(f"figure: {args.out}/waveforms.png")
 
 
 if __name__ == "__main__":

@@ -51,24 +51,18 @@ def _integrate_path(function, medium: DiffusionMedium) -> float:
 def test_area_integral_of_r_rho_is_the_closed_form(medium, beam_radius):
     for path in (2e-3, 0.05, 1.0):
         spread = math.sqrt(4 * medium.diffusion_coefficient * path + beam_radius**2)
-        numeric = quad(
-            lambda rho, path=path: 2 * math.pi * rho * float(reflectance(medium, rho, path, beam_radius=beam_radius)),
-            0,
-            12 * spread,
-            epsabs=0,
-            epsrel=1e-11,
-            limit=200,
-        )[0]
-        assert numeric == pytest.approx(float(total_reflectance(medium, path)), rel=1e-9)
-        numeric_phi = quad(
-            lambda rho, path=path: 2 * math.pi * rho * float(fluence(medium, rho, path, beam_radius=beam_radius)),
-            0,
-            12 * spread,
-            epsabs=0,
-            epsrel=1e-11,
-            limit=200,
-        )[0]
-        assert numeric_phi == pytest.approx(float(total_fluence(medium, path)), rel=1e-9)
+        for local, total in ((reflectance, total_reflectance), (fluence, total_fluence)):
+            numeric = quad(
+                lambda rho, path=path, local=local: (
+                    2 * math.pi * rho * float(local(medium, rho, path, beam_radius=beam_radius))
+                ),
+                0,
+                12 * spread,
+                epsabs=0,
+                epsrel=1e-11,
+                limit=200,
+            )[0]
+            assert numeric == pytest.approx(float(total(medium, path)), rel=1e-9), local.__name__
 
 
 @pytest.mark.parametrize("medium", MEDIA, ids=IDS)
