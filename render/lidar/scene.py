@@ -143,3 +143,85 @@ def bins_for(opl_span: float, bin_width_opl: float) -> int:
     if not bin_width_opl > 0:
         raise ValueError(f"bin width must be positive, got {bin_width_opl} m")
     return max(1, math.ceil(opl_span / bin_width_opl))
+
+
+def flux_scene(
+    receiver: Receiver,
+    snow: dict[str, Any],
+    *,
+    depth: float,
+    half_width: float,
+    rings: Sequence[tuple[float, float]] | None = None,
+    gap: float = 5e-5,
+    segments: int = 128,
+) -> dict[str, Any]:
+    """Flat snow under the orthographic receiver, lit by Lambertian emitters of unit radiance that face down
+    from ``gap`` above the snow (render/lidar/LIDAR.md §7.6). By reciprocity a pixel at x holds the flux that a
+    nadir pencil entering at x sends back up through the emitters' area, over all directions.
+
+    Without ``rings`` one square emitter as wide as the snow, in every channel, gives the area-integrated R(t)
+    of diffusion theory. With ``rings`` [(inner, outer), ...] (at most three, radii in metres about the
+    receiver's centre; inner 0 for a disk) ring k emits in channel k only, so one render holds R(ρ, t)
+    integrated over up to three rings. The snow is a box ``half_width`` on each side of the centre and
+    ``depth`` deep under z = 0; camera rays cross the emitters from behind, where they neither emit nor stop
+    them (null faces)."""
+    if not 0 < gap < receiver.reference_height:
+        raise ValueError(f"the emitter's gap {gap} m must lie between the snow and the reference plane")
+    cx, cy = receiver.centre
+    v, f = box_mesh((cx - half_width, cy - half_width, -depth), (cx + half_width, cy + half_width, 0.0))
+    shapes: list[dict[str, Any]] = [{"vertices": v, "faces": f, "kind": "null", "interior": 0, "exterior": -1}]
+    if rings is None:
+        corners = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) * half_width
+        shapes.append(_emitter(_fan(corners), (cx, cy), gap, (1.0, 1.0, 1.0)))
+    else:
+        if not 1 <= len(rings) <= 3:
+            raise ValueError(f"flux_scene takes one to three rings (one per channel), got {len(rings)}")
+        angles = 2 * np.pi * np.arange(segments) / segments
+        unit = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        for k, (inner, outer) in enumerate(rings):
+            if not 0 <= inner < outer < half_width:
+                raise ValueError(f"ring {k}: radii ({inner}, {outer}) m must satisfy 0 <= inner < outer < {half_width}")
+            radiance = tuple(1.0 if c == k else 0.0 for c in range(3))
+            mesh = _fan(outer * unit) if inner == 0 else _annulus(inner * unit, outer * unit)
+            shapes.append(_emitter(mesh, (cx, cy), gap, radiance))
+    return {"media": [snow], "shapes": shapes, "camera": receiver.camera(), "film": receiver.film()}
+
+
+def _fan(outline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A convex outline (n, 2), counter-clockwise, as a fan about the origin wound to face down."""
+    n = len(outline)
+    vertices = np.vstack([np.zeros((1, 2)), outline])
+    faces = np.array([[0, 1 + (i + 1) % n, 1 + i] for i in range(n)])
+    return vertices, faces
+
+
+def _annulus(inner: np.ndarray, outer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The band between two counter-clockwise outlines of n points each, wound to face down."""
+    n = len(inner)
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [[i, n + j, n + i], [i, j, n + j]]
+    return np.vstack([inner, outer]), np.array(faces)
+
+
+def _emitter(
+    mesh: tuple[np.ndarray, np.ndarray], centre: tuple[float, float], height: float, radiance: tuple[float, ...]
+) -> dict[str, Any]:
+    xy, faces = mesh
+    vertices = np.column_stack([xy[:, 0] + centre[0], xy[:, 1] + centre[1], np.full(len(xy), height)])
+    return {
+        "vertices": vertices.astype(np.float32),
+        "faces": faces.astype(np.uint32),
+        "kind": "null",
+        "interior": -1,
+        "exterior": -1,
+        "radiance": radiance,
+    }
+
+
+def polygon_area(shape: dict[str, Any]) -> float:
+    """The area of a shape's triangles [m²] (an emitter's, for its power)."""
+    v = np.asarray(shape["vertices"], dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(shape["faces"], dtype=np.int64).reshape(-1, 3)
+    return float(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum())

@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "ptpb"))
 from halfspace import reflected_radiance  # noqa: E402
 
 from render.lidar import diffusion  # noqa: E402
-from render.lidar.scene import Receiver, medium, receiver_weights, shot_scene  # noqa: E402
+from render.lidar.scene import Receiver, flux_scene, medium, receiver_weights, shot_scene  # noqa: E402
 from render.lidar.waveform import convolve_pulse, estimate_ranges, pulse_sigma_opl  # noqa: E402
 from render.ptpb.api import render  # noqa: E402
 from render.scene.shapes import box_mesh  # noqa: E402
@@ -184,6 +184,166 @@ def test_area_integrated_return_has_the_exact_mean_path_and_total(diffusion_rend
     assert late < 1e-3
     assert mean == pytest.approx(exact, rel=0.015)
     assert total == pytest.approx(steady, rel=0.02)
+
+
+# ------------------------------------------------------------- the flux receiver (render/lidar/LIDAR.md §7.6)
+
+FLUX_GAP = 5e-5  # the emitters' height above the snow [m]
+
+
+def flux_path(receiver: Receiver) -> np.ndarray:
+    """The in-snow path [m] at the centre of each bin of a flux render: the camera's descent from the reference
+    plane plus the gap, crossed twice on average by light that leaves the emitters' cosine law (2 gap)."""
+    return (np.arange(receiver.temporal_bins) + 0.5) * receiver.bin_width_opl - receiver.reference_height - 2 * FLUX_GAP
+
+
+def exact_flux_albedo(sigma_s: float, sigma_a: float) -> float:
+    """The flux an isotropic half-space returns of a pencil at normal incidence, over all directions:
+    1 - sqrt(1 - w) H(1) (Chandrasekhar)."""
+    from halfspace import chandrasekhar_h
+
+    albedo = sigma_s / (sigma_s + sigma_a)
+    return 1.0 - math.sqrt(1.0 - albedo) * float(chandrasekhar_h(albedo, nodes=800)(np.array(1.0)))
+
+
+def test_flux_receiver_returns_the_exact_albedo_and_the_diffusion_mean_path():
+    """The issue's receiver: all the flux a pencil at normal incidence sends back, over the whole surface and
+    every direction, per metre of path (by reciprocity, the nadir radiance under a downward Lambertian emitter as
+    wide as the snow). Its time integral is Chandrasekhar's flux albedo within 2 %, and its mean in-snow path is
+    diffusion's closed form (LIDAR.md §3.6) within 5 % and exact transport's -d ln A / d sigma_a within 1.5 %."""
+    receiver = Receiver((0.0, 0.0), 0.1, 8, SURFACE_OPL / 2, 0.005, 2002)
+    scene = flux_scene(receiver, grey(1 / ELL, SIGMA_A), depth=1.0, half_width=0.5, gap=FLUX_GAP)
+    r = render(scene, settings(iterations=1_000_000, time_budget_s=15.0))
+    energy = r.frames.mean(axis=(1, 2, 3)).astype(np.float64)
+    path = flux_path(receiver)
+    total = float((r.frames.sum(axis=0) + r.early + r.late).mean())
+    albedo = exact_flux_albedo(1 / ELL, SIGMA_A)
+    h = 1e-3 * SIGMA_A
+    exact = -(math.log(exact_flux_albedo(1 / ELL, SIGMA_A + h)) - math.log(exact_flux_albedo(1 / ELL, SIGMA_A - h))) / (
+        2 * h
+    )
+    closed = diffusion.mean_path_length(diffusion.DiffusionMedium(1 / ELL, SIGMA_A))
+    mean = float((energy * path).sum() / energy.sum())
+    print(
+        f"flux: total / exact albedo {total / albedo:.4f}; mean path {mean:.5f} m, diffusion {closed:.5f} m "
+        f"({mean / closed - 1:+.2%}), exact {exact:.5f} m ({mean / exact - 1:+.2%}); {r.stats['iterations']} iterations"
+    )
+    assert r.late.mean() < 1e-3 * total
+    assert total == pytest.approx(albedo, rel=0.02)
+    assert mean == pytest.approx(closed, rel=0.05)
+    assert mean == pytest.approx(exact, rel=0.015)
+
+
+def ring_flux_theory(
+    receiver: Receiver, medium: diffusion.DiffusionMedium, ring: tuple[float, float], samples: int = 4096
+) -> np.ndarray:
+    """Diffusion's R(rho, L) integrated over a ring emitter and averaged over the receiver's pixels, per bin: a
+    Monte Carlo average over points of both (a fixed seed; the pixels' jitter and the ring's area are small
+    against rho but not nothing early, where R falls steeply with rho)."""
+    rng = np.random.default_rng(0)
+    xs, ys = receiver.pixel_centres()
+    pixel = receiver.side / receiver.pixels
+    px = rng.choice(xs, samples) + (rng.random(samples) - 0.5) * pixel
+    py = rng.choice(ys, samples) + (rng.random(samples) - 0.5) * pixel
+    inner, outer = ring
+    radius = np.sqrt(inner**2 + (outer**2 - inner**2) * rng.random(samples))
+    angle = 2 * np.pi * rng.random(samples)
+    rho = np.hypot(px - radius * np.cos(angle), py - radius * np.sin(angle))
+    area = math.pi * (outer**2 - inner**2)
+    surface = receiver.reference_height + 2 * FLUX_GAP
+    w = receiver.bin_width_opl
+    mean = diffusion.bin_average(
+        lambda path: diffusion.reflectance(medium, rho[None, None, :], path[..., None]).mean(-1),
+        0.0,
+        w,
+        receiver.temporal_bins,
+        surface_opl=surface,
+        nodes=4,
+    )
+    return mean * w * area
+
+
+def test_flux_scene_emitters_face_the_snow_and_refuse_bad_rings():
+    """Every emitter triangle faces down (its emitting side), a ring's area is pi (outer^2 - inner^2) to the
+    polygon's error, ring k emits in channel k alone, and rings that do not fit are refused by name."""
+    from render.lidar.scene import polygon_area
+
+    receiver = Receiver((0.1, -0.2), 0.004, 4, 0.005, 0.002, 10)
+    scene = flux_scene(receiver, grey(1.0, 1.0), depth=1.0, half_width=0.5, rings=[(0.0, 0.001), (0.014, 0.016)])
+    for k, shape in enumerate(scene["shapes"][1:]):
+        v = np.asarray(shape["vertices"], dtype=np.float64)
+        f = np.asarray(shape["faces"], dtype=np.int64)
+        normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        assert np.all(normals[:, 2] < 0)
+        assert shape["radiance"] == tuple(1.0 if c == k else 0.0 for c in range(3))
+        assert np.allclose(v[:, 2], FLUX_GAP, atol=1e-9)
+    assert polygon_area(scene["shapes"][2]) == pytest.approx(math.pi * (0.016**2 - 0.014**2), rel=1e-3)
+    with pytest.raises(ValueError, match="one to three rings"):
+        flux_scene(receiver, grey(1.0, 1.0), depth=1.0, half_width=0.5, rings=[(0.0, 0.001)] * 4)
+    with pytest.raises(ValueError, match="ring 0"):
+        flux_scene(receiver, grey(1.0, 1.0), depth=1.0, half_width=0.5, rings=[(0.002, 0.001)])
+    with pytest.raises(ValueError, match="gap"):
+        flux_scene(receiver, grey(1.0, 1.0), depth=1.0, half_width=0.5, gap=0.01)
+
+
+RING_ELL = (5, 10, 20)  # ring radii in l*, channels 0-2
+
+
+def spatial_flux(seconds: float, seed: int):
+    """Rings at 5, 10 and 20 l*, 3 mm wide, in channels 0-2, over a 4 mm film of 32 x 32 pixels at the centre
+    (four tiles: both cores work); 2 mm bins over 1.2 m of path; sigma_a = 0.5 per m (sigma_a / sigma_s' =
+    1.5e-3; 0.02 per m gives the same ratios, LIDAR.md §7.6)."""
+    receiver = Receiver((0.0, 0.0), 0.004, 32, SURFACE_OPL / 2, 0.002, 600)
+    rings = [(k * ELL - 0.0015, k * ELL + 0.0015) for k in RING_ELL]
+    scene = flux_scene(receiver, grey(1 / ELL, SIGMA_A), depth=1.0, half_width=0.5, rings=rings, gap=FLUX_GAP)
+    r = render(scene, settings(iterations=1_000_000, time_budget_s=seconds, seed=seed))
+    return r, receiver, rings, diffusion.DiffusionMedium(1 / ELL, SIGMA_A)
+
+
+@pytest.fixture(scope="module")
+def spatial_flux_render():
+    return spatial_flux(25.0, seed=2)
+
+
+def check_ring(shot, ell_ratio: int, bin_opl: float) -> None:
+    """R(rho, t) of one ring against the dipole over bins of ``bin_opl`` holding more than 10 % of the ring's
+    largest bin, once the path exceeds 4 rho (3 rho / c past the first arrival): within 10 % each."""
+    r, receiver, rings, medium = shot
+    channel = RING_ELL.index(ell_ratio)
+    group = round(bin_opl / receiver.bin_width_opl)
+    n = receiver.temporal_bins // group
+    measured = r.frames[..., channel].astype(np.float64).mean(axis=(1, 2))[: n * group].reshape(n, group).sum(axis=1)
+    theory = ring_flux_theory(receiver, medium, rings[channel])[: n * group].reshape(n, group).sum(axis=1)
+    path = (np.arange(n) + 0.5) * bin_opl - receiver.reference_height - 2 * FLUX_GAP
+    rho = ell_ratio * ELL
+    strong = theory > 0.1 * theory.max()
+    use = strong & (path > 4 * rho)
+    ratio = measured[use] / theory[use]
+    before = strong & (path <= 4 * rho)
+    print(
+        f"rho = {ell_ratio} l*: {use.sum()} bins of {bin_opl * 1e3:.0f} mm past 4 rho, render / diffusion "
+        f"{ratio.min():.3f}-{ratio.max():.3f}; before, at (L - rho) / l* = "
+        + ", ".join(
+            f"{(p - rho) / ELL:.0f}: {m / t:.2f}" for p, m, t in zip(path[before], measured[before], theory[before])
+        )
+    )
+    assert use.sum() >= 5
+    assert np.all(np.abs(ratio - 1) < 0.10)
+
+
+@pytest.mark.parametrize(("ell_ratio", "bin_opl"), [(5, 0.02), (10, 0.04)])
+def test_spatially_resolved_flux_against_diffusion(spatial_flux_render, ell_ratio, bin_opl):
+    """R(rho, t) of a pencil at normal incidence at rho = 5 and 10 l* against the extrapolated-boundary dipole
+    (A = 1, z_b = 2D), by reciprocity the nadir radiance at the centre under a ring emitter at rho. Diffusion
+    runs early on the rising edge, and for longer the further out: within 10 % from some 8 l* past the first
+    arrival at 5 l*, 20 l* at 10 l* and 55 l* at 20 l* (LIDAR.md §7.6), so the check starts at 4 rho."""
+    check_ring(spatial_flux_render, ell_ratio, bin_opl)
+
+
+@pytest.mark.slow
+def test_spatially_resolved_flux_far_out():
+    """The same at rho = 20 l*, where a ring holds 1e-3 of the paths: 150 s, bins of 4 cm."""
+    check_ring(spatial_flux(150.0, seed=3), 20, 0.04)
 
 
 def test_a_gaussian_beam_lights_its_profile():
