@@ -65,6 +65,7 @@ log = logging.getLogger(__name__)
 SNAKEFILE = Path(__file__).resolve().parent / "workflow" / "Snakefile"
 PROFILES_DIR = PROJECT_ROOT / "profiles"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
+MAX_POINT_NAME = 80  # characters of a point name
 # Keys the sweep itself decides for every point.
 RESERVED_KEYS = {
     "name": "the sweep names each run '<sweep>-<point>'",
@@ -92,7 +93,7 @@ class PointSpec(StrictModel):
     """One point of a sweep file (key path points[i].<field>)."""
 
     name: str = Field(
-        ..., pattern=NAME_PATTERN, max_length=80, description="Point name; its run is <sweep>-<name> [-]."
+        ..., pattern=NAME_PATTERN, max_length=MAX_POINT_NAME, description="Point name; its run is <sweep>-<name> [-]."
     )
     description: str = Field("", description="What the point is, for the report [-].")
     set: list[str] = Field(default_factory=list, description="Overrides of this point, dotted keys as --set [-].")
@@ -193,6 +194,11 @@ def _grid_points(grid: dict[str, Any]) -> list[PointSpec]:
     points = []
     for combination in itertools.product(*axes):
         name = "_".join(f"{key.split('.')[-1]}-{label}" for key, label, _ in combination)
+        if len(name) > MAX_POINT_NAME:
+            raise SweepError(
+                f"grid point '{name}' has a name of {len(name)} characters, over {MAX_POINT_NAME}: shorten the "
+                "grid's labels (give a key's values as a mapping, label: value) or list the points"
+            )
         points.append(PointSpec(name=name, set=[f"{key}={json.dumps(value)}" for key, _, value in combination]))
     return points
 
@@ -271,7 +277,10 @@ def load_sweep(path: str | Path) -> Sweep:
     if spec.points is not None:
         specs = spec.points
     elif spec.grid is not None:
-        specs = _grid_points(spec.grid)
+        try:
+            specs = _grid_points(spec.grid)
+        except SweepError as exc:
+            raise SweepError(f"{path}: {exc}") from None
     if not specs:
         raise SweepError(f"{path}: the sweep has no points")
     seen: dict[str, int] = {}

@@ -4,13 +4,15 @@
     python -m render.lidar.table runs/lidar_icesat2 runs/lidar_airborne ... --out runs/lidar_table
 
 writes ``biases.csv`` and ``biases.md`` (cm, against the footprint mean, the highest point and the flat
-equivalent) in ``--out``.
+equivalent) in ``--out``. A sweep of lidar runs (``configs/sweeps/lidar_biases.yaml``) gets its summary from
+``write_sweep_summary``: the full table, the README's compact one and a figure of every point's waveform.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import html
 import json
 from pathlib import Path
 
@@ -44,10 +46,13 @@ def rows_of(run: Path) -> list[dict]:
     return rows
 
 
-def write_table(rows: list[dict], out: Path) -> None:
+def write_table(rows: list[dict], out: Path, stem: str = "biases") -> tuple[Path, Path]:
+    """``rows`` as ``stem``.csv and ``stem``.md in ``out`` (biases with one decimal, in cm); returns both paths."""
+    if not rows:
+        raise ValueError(f"no bias rows to write to {out}: none of the runs had a lidar summary")
     out.mkdir(parents=True, exist_ok=True)
     keys = list(rows[0])
-    with atomic_path(out / "biases.csv") as tmp, open(tmp, "w", newline="") as f:
+    with atomic_path(out / f"{stem}.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, keys)
         writer.writeheader()
         writer.writerows(rows)
@@ -56,12 +61,104 @@ def write_table(rows: list[dict], out: Path) -> None:
         lines.append(
             "| "
             + " | ".join(
-                f"{v:+.1f}" if isinstance(v, float) and k.startswith("bias") else str(v) for k, v in row.items()
+                f"{v:+.1f}" if isinstance(v, float) and (k.startswith("bias") or k in ESTIMATOR_COLUMNS) else str(v)
+                for k, v in row.items()
             )
             + " |"
         )
-    with atomic_path(out / "biases.md") as tmp:
+    with atomic_path(out / f"{stem}.md") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return out / f"{stem}.csv", out / f"{stem}.md"
+
+
+ESTIMATOR_COLUMNS = ("first_return", "peak", "gaussian_fit", "median", "centroid")
+
+
+def compact_rows(rows: list[dict], channel: str, reference: str = "flat_equivalent") -> list[dict]:
+    """One row per run: its inputs and every estimator's bias [cm] in ``channel`` against ``reference`` (the
+    README's table)."""
+    out: dict[str, dict] = {}
+    for row in rows:
+        if row["channel"] != channel:
+            continue
+        entry = out.setdefault(row["run"], {k: row[k] for k in COLUMNS if k not in ("channel", "estimator")})
+        entry[row["estimator"]] = row[f"bias_{reference}_cm"]
+    return list(out.values())
+
+
+def write_sweep_summary(spec: dict) -> dict[str, Path]:
+    """The summary of a sweep whose points end in the lidar stage (``spec``: the sweep's workflow.yaml):
+    ``biases.csv``/``.md`` (every point, channel, estimator and reference), ``summary.csv``/``.md``/``.html``
+    (a row per point: 532 nm with Warren & Brandt ice against the flat-equivalent surface), ``poster.png``
+    (every point's pulsed waveform) and ``report.html``, in the sweep's folder."""
+    from render.output.report import markdown_table_to_html
+
+    folder = Path(spec["folder"])
+    runs = {name: Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}" for name in spec["points"]}
+    rows = []
+    for name, run in runs.items():
+        for row in rows_of(run):
+            rows.append({**row, "run": name})
+    write_table(rows, folder, "biases")
+    channel = rows[0]["channel"]
+    csv_path, md_path = write_table(compact_rows(rows, channel), folder, "summary")
+    table_html = markdown_table_to_html(md_path.read_text(encoding="utf-8"))
+    with atomic_path(folder / "summary.html") as tmp:
+        Path(tmp).write_text(table_html, encoding="utf-8")
+    _plot_sweep_waveforms(runs, folder / "poster.png")
+    parts = [f"<h1>Sweep '{html.escape(spec['sweep'])}': lidar range biases</h1>"]
+    if spec.get("description"):
+        parts.append(f"<p>{html.escape(spec['description'])}</p>")
+    parts.append(
+        f"<p>{len(runs)} points from <code>{html.escape(spec['sweep_file'])}</code>. Bias [cm] = the estimator's "
+        f"range minus the range of the flat-equivalent surface, {html.escape(channel)}; positive: the surface "
+        "reads low. Every channel and reference height: "
+        '<a href="biases.csv">biases.csv</a> · <a href="biases.md">biases.md</a> (render/lidar/LIDAR.md §4).</p>'
+    )
+    parts.append(f"<div style='overflow-x: auto'>{table_html}</div>")
+    parts.append(
+        '<figure><img src="poster.png" alt="waveforms" style="max-width: 100%"><figcaption>pulsed waveforms, '
+        f"{html.escape(channel)}, each over its peak</figcaption></figure>"
+    )
+    page = "<!doctype html><meta charset='utf-8'><title>lidar sweep</title><body>" + "\n".join(parts) + "</body>"
+    with atomic_path(folder / "report.html") as tmp:
+        Path(tmp).write_text(page, encoding="utf-8")
+    return {"csv": csv_path, "md": md_path, "poster": folder / "poster.png", "report": folder / "report.html"}
+
+
+def _plot_sweep_waveforms(runs: dict[str, Path], path: Path) -> None:
+    """Every point's first-channel pulsed waveform against the height of the return above the flat-equivalent
+    surface, one panel per target and footprint."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    panels: dict[str, list[tuple[str, np.ndarray, np.ndarray]]] = {}
+    for name, run in runs.items():
+        summary = json.loads((run / "lidar" / "summary.json").read_text())
+        lidar = summary["config"]
+        with np.load(run / "lidar" / "waveform.npz") as data:
+            height = float(data["reference_height"]) - data["range_m"]
+            pulsed = np.asarray(data["pulsed"][:, 0], dtype=np.float64)
+        key = f"{summary['target']}, {lidar['footprint_diameter']:g} m footprint"
+        label = f"{lidar['density']:g} kg/m³, {1000 * lidar['optical_diameter']:g} mm"
+        panels.setdefault(key, []).append((label, height, pulsed / pulsed.max() if pulsed.max() > 0 else pulsed))
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), dpi=130, squeeze=False)
+    for ax, (key, curves) in zip(axes[0], sorted(panels.items())):
+        for label, height, pulsed in curves:
+            ax.plot(height, pulsed, lw=1.0, label=label)
+        ax.axvline(0.0, color="0.5", ls=":", lw=0.8)
+        ax.set_title(key, fontsize=9)
+        ax.set_xlabel("height above the flat-equivalent surface [m]")
+        ax.set_xlim(-1.5, 1.2)
+    axes[0][0].set_ylabel("pulsed waveform / its peak")
+    axes[0][-1].legend(fontsize=7)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
 
 
 def main() -> None:

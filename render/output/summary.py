@@ -341,6 +341,10 @@ def _report(spec: dict, rows: list[dict], table_md: Path, folder: Path, has_erro
 def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
     """The sweep summary from the points' stage outputs; missing files give empty cells and warnings."""
     spec = yaml.safe_load(Path(workflow_yaml).read_text(encoding="utf-8"))
+    if spec.get("target_stage") == "lidar":  # laser shots: a table of range biases, not images
+        from render.lidar.table import write_sweep_summary
+
+        return write_sweep_summary(spec)
     folder = Path(spec["folder"])
     truth = None
     if spec.get("ground_truth"):
