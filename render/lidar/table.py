@@ -83,7 +83,12 @@ def compact_rows(rows: list[dict], channel: str, reference: str = "flat_equivale
             continue
         entry = out.setdefault(row["run"], {k: row[k] for k in COLUMNS if k not in ("channel", "estimator")})
         entry[row["estimator"]] = row[f"bias_{reference}_cm"]
-    return list(out.values())
+    # Estimators from the leading edge to the tail, then any others.
+    order = {name: i for i, name in enumerate(ESTIMATOR_COLUMNS)}
+    return [
+        {k: v for k, v in sorted(entry.items(), key=lambda kv: (kv[0] in order, order.get(kv[0], 0)))}
+        for entry in out.values()
+    ]
 
 
 def write_sweep_summary(spec: dict) -> dict[str, Path]:
@@ -136,14 +141,18 @@ def _plot_sweep_waveforms(runs: dict[str, Path], path: Path) -> None:
     import numpy as np
 
     panels: dict[str, list[tuple[str, np.ndarray, np.ndarray]]] = {}
-    for name, run in runs.items():
+    for run in runs.values():
         summary = json.loads((run / "lidar" / "summary.json").read_text())
         lidar = summary["config"]
         with np.load(run / "lidar" / "waveform.npz") as data:
             height = float(data["reference_height"]) - data["range_m"]
             pulsed = np.asarray(data["pulsed"][:, 0], dtype=np.float64)
         key = f"{summary['target']}, {lidar['footprint_diameter']:g} m footprint"
-        label = f"{lidar['density']:g} kg/m³, {1000 * lidar['optical_diameter']:g} mm"
+        label = (
+            f"albedo {lidar['bare_albedo']:g}"
+            if summary["target"] == "bare"
+            else f"{lidar['density']:g} kg/m³, {1000 * lidar['optical_diameter']:g} mm"
+        )
         panels.setdefault(key, []).append((label, height, pulsed / pulsed.max() if pulsed.max() > 0 else pulsed))
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), dpi=130, squeeze=False)
     for ax, (key, curves) in zip(axes[0], sorted(panels.items())):
@@ -153,8 +162,8 @@ def _plot_sweep_waveforms(runs: dict[str, Path], path: Path) -> None:
         ax.set_title(key, fontsize=9)
         ax.set_xlabel("height above the flat-equivalent surface [m]")
         ax.set_xlim(-1.5, 1.2)
+        ax.legend(fontsize=7)
     axes[0][0].set_ylabel("pulsed waveform / its peak")
-    axes[0][-1].legend(fontsize=7)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")

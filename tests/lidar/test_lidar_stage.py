@@ -5,8 +5,11 @@ writes."""
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -78,3 +81,39 @@ def test_flat_snow_reads_late_and_1064_nm_less_late(tmp_path):
     assert green["apparent_reflectance"] > 0.9
     assert infrared["apparent_reflectance"] < 0.8 * green["apparent_reflectance"]
     assert not math.isnan(green["estimates"]["gaussian_fit"])
+
+
+@pytest.mark.skipif(importlib.util.find_spec("snakemake") is None, reason="snakemake not installed")
+def test_a_lidar_sweep_summarises_its_biases(tmp_path):
+    """A sweep of two shots through the workflow (`python -m pipeline sweep`): a bare plane and flat snow. Its
+    summary is the bias table: a row per point (532 nm, flat-equivalent reference) where the plane reads zero
+    within a fifth of a range bin and the snow reads late by every estimator, the full table (two points x 3
+    channels x 5 estimators), the waveforms' figure and the report."""
+    base = tmp_path / "base.yaml"
+    base.write_text(
+        f"runs_dir: {tmp_path / 'runs'}\nthreads: 2\nlidar:\n  enabled: true\n  footprint_diameter: 0.2\n"
+        "  pixels: 16\n  iterations: 16\n  tail_range: 0.5\n  bare_albedo: 0.5\n"
+    )
+    (tmp_path / "s.yaml").write_text(
+        "base: base.yaml\npoints:\n  - {name: bare, set: {lidar.target: bare}}\n"
+        "  - {name: snow, set: {lidar.target: flat_snow, lidar.density: 300, lidar.optical_diameter: 0.0005}}\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-m", "pipeline", "sweep", "s.yaml", "--cores", "2"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    folder = tmp_path / "runs" / "sweeps" / "s"
+    rows = {row["run"]: row for row in csv.DictReader((folder / "summary.csv").open())}
+    assert set(rows) == {"bare", "snow"}
+    estimators = ("first_return", "peak", "gaussian_fit", "median", "centroid")
+    range_bin_cm = 100 * 0.005
+    assert all(abs(float(rows["bare"][e])) < 0.2 * range_bin_cm for e in estimators), rows["bare"]
+    assert all(float(rows["snow"][e]) > 0 for e in estimators), rows["snow"]
+    assert len(list(csv.DictReader((folder / "biases.csv").open()))) == 2 * 3 * 5
+    assert (folder / "poster.png").stat().st_size > 10_000
+    report = (folder / "report.html").read_text()
+    assert "lidar range biases" in report and "<table" in report
