@@ -144,6 +144,7 @@ class FrameError:
 
     def __init__(self, a: np.ndarray, b: np.ndarray):
         a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+        self.halves = (a, b)
         self.reference = 0.5 * (a + b)
         self.weight = 1.0 / (self.reference**2 + RELMSE_EPSILON)
         self.reference_noise = float(np.mean((a - b) ** 2 * self.weight) / 4.0)
@@ -155,3 +156,7 @@ class FrameError:
 
     def __call__(self, x: np.ndarray) -> float:
         return self.raw(x) - self.reference_noise
+
+    def late(self, first: int) -> FrameError:
+        """The same error over frames ``first`` on (call it with those frames of a render)."""
+        return FrameError(self.halves[0][first:], self.halves[1][first:])
