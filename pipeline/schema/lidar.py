@@ -57,6 +57,14 @@ class LidarConfig(StrictModel):
     time_budget_s: float | None = Field(
         None, gt=0, description="Stop the render after this many seconds instead of counting iterations [s]."
     )
+    path_max_survival: float = Field(
+        0.999,
+        gt=0.9,
+        lt=1,
+        description="Roulette survival cap per collision of the shot's camera paths [-]. A path that scatters N times "
+        "gains weight as e^(N (1 - cap)); in fine-grained snow late paths scatter thousands of times, so 0.9999 "
+        "removes their fireflies at some 2.3x the time (render/lidar/LIDAR.md §8).",
+    )
 
     @model_validator(mode="after")
     def _pulse_resolved(self) -> LidarConfig:

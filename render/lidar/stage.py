@@ -138,6 +138,7 @@ def _lidar(cfg, out_dir: Path, geometry_dir: Path | None, seed: int, threads: in
         "seed": seed,
         "threads": threads,
         "medium_estimator": "paths",
+        "path_max_survival": cfg.path_max_survival,
     }
     if cfg.time_budget_s is not None:
         settings.update(iterations=10**7, time_budget_s=cfg.time_budget_s)
