@@ -3,8 +3,8 @@
 For each row scene (configs/bench/dense_cube.yaml, demo_snow.yaml, thesis_set_1.yaml) this renders a long
 mitransient reference once (two halves, cached in benchmarks/results/cache/, as bench_ptpb.py does), then
 mitransient's transient_prbvolpath twice, in whole passes for at least ``--seconds`` of wall time each: as
-shipped (Russian roulette from depth 5) and tuned (roulette from depth ``--tuned-rr``, 1000 by default; its
-survival cap of 0.95 per collision otherwise ends the long paths of dense snow). Ours then renders in bins
+shipped (Russian roulette from depth 5) and tuned (roulette from the row's ``reference.rr_depth``, at least
+1000, or ``--tuned-rr``; its survival cap of 0.95 per collision otherwise ends the long paths of dense snow). Ours then renders in bins
 mode for the longer of the two times. Each mitransient error is brought to ours' time as relMSE x time
 (unbiased Monte Carlo: relMSE falls as 1/t), and the ratio is taken against the better of the two. Errors are
 per-frame relMSE against the reference (its own noise taken out), over all frames and over the late third,
@@ -19,9 +19,11 @@ benchmarks/results/bench_dense.{md,csv}.
 from __future__ import annotations
 
 import argparse
+import math
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +101,21 @@ def mitransient_equal_time(scene_dir: Path, seconds: float, cfg, rr_depth: int) 
     return total / spp, spp, spent
 
 
+@dataclass(frozen=True)
+class Baseline:
+    """One mitransient run of a row: its errors scaled to ours' time (all frames, late third) and its cost."""
+
+    relmse: float
+    late_relmse: float
+    spp: int
+    seconds: float
+
+
+def ratio_of(ours_error: float, baseline_error: float) -> float:
+    """ours / baseline, NaN when either corrected error is inside the reference's own noise (at or below 0)."""
+    return ours_error / baseline_error if ours_error > 0 and baseline_error > 0 else float("nan")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="wall time of each side per row [s]")
@@ -130,20 +147,21 @@ def main() -> None:
         late = error.late(first_late)
         # mitransient renders in whole passes and overshoots --seconds by up to one, so it goes first and ours
         # then gets the longer of its two times.
-        runs = {}
+        measured = {}
         for name, rr in baselines.items():
             frames_mt, spp, spent = mitransient_equal_time(scene_dir, args.seconds, cfg.reference, rr)
-            runs[name] = (error(frames_mt), late(frames_mt[first_late:]), spp, spent)
+            measured[name] = (error(frames_mt), late(frames_mt[first_late:]), spp, spent)
             print(f"{row}: mitransient {name} (rr {rr}): {spp} spp in {spent:.0f} s", flush=True)
-        seconds = max(r[3] for r in runs.values())
+        seconds = max(spent for *_, spent in measured.values())
         frames, stats = ours(scene_dir, cfg, seconds)
         e_ours, e_ours_late = error(frames), late(frames[first_late:])
         # relMSE x time is what a Monte Carlo render holds fixed: each baseline at ours' time.
-        scaled = {name: (e * t / seconds, el * t / seconds) for name, (e, el, _, t) in runs.items()}
-        better = min(scaled.values(), key=lambda pair: pair[0])
-        better_late = min(pair[1] for pair in scaled.values())
-        ratio = e_ours / better[0] if better[0] > 0 else float("nan")
-        late_ratio = e_ours_late / better_late if better_late > 0 else float("nan")
+        runs = {
+            name: Baseline(e * spent / seconds, e_late * spent / seconds, spp, spent)
+            for name, (e, e_late, spp, spent) in measured.items()
+        }
+        ratio = ratio_of(e_ours, min(b.relmse for b in runs.values()))
+        late_ratio = ratio_of(e_ours_late, min(b.late_relmse for b in runs.values()))
         # Per-frame energy against the long reference, over the frames holding more than 1 % of it.
         ref_energy = error.reference.sum(axis=(1, 2, 3))
         energetic = ref_energy > 0.01 * ref_energy.sum()
@@ -153,25 +171,24 @@ def main() -> None:
         print(
             f"{row}: ours ({estimator}, {stats['iterations']} iterations, {seconds:.0f} s) relMSE {e_ours:.3g} "
             f"(late third {e_ours_late:.3g}); mitransient at ours' time "
-            + "; ".join(f"{n} {v[0]:.3g} (late {v[1]:.3g})" for n, v in scaled.items())
+            + "; ".join(f"{n} {b.relmse:.3g} (late {b.late_relmse:.3g})" for n, b in runs.items())
             + f"; ratio against the better {ratio:.3g} (late third {late_ratio:.3g}); reference noise "
             f"{error.reference_noise:.2g}; ours/reference frame energy {energy_text}",
             flush=True,
         )
+        shipped, tuned = runs["shipped"], runs["tuned"]
         cells = [
-            f"{scaled['shipped'][0]:.3g} ({scaled['shipped'][1]:.3g}; {runs['shipped'][2]})",
-            f"{scaled['tuned'][0]:.3g} ({scaled['tuned'][1]:.3g}; rr {baselines['tuned']}; {runs['tuned'][2]})",
+            f"{shipped.relmse:.3g} ({shipped.late_relmse:.3g}; {shipped.spp})",
+            f"{tuned.relmse:.3g} ({tuned.late_relmse:.3g}; rr {baselines['tuned']}; {tuned.spp})",
         ]
-        # A corrected error at or below zero is within the reference's own noise: no ratio can be read.
-        ratio_text = f"{ratio:.3g}" if e_ours > 0 and better[0] > 0 else "within reference noise"
-        late_text = f"{late_ratio:.3g}" if e_ours_late > 0 and better_late > 0 else "within reference noise"
+        ratio_text, late_text = ("within reference noise" if math.isnan(r) else f"{r:.3g}" for r in (ratio, late_ratio))
         lines.append(
             f"| {row} | {estimator} | {e_ours:.3g} ({e_ours_late:.3g}) | {cells[0]} | {cells[1]} "
             f"| **{ratio_text}** ({late_text}) | {seconds:.0f} | {energy_text} |"
         )
         csv.append(
             f"{row},{stats['path_media']},{seconds:.3f},{e_ours:.6g},{e_ours_late:.6g},"
-            + ",".join(f"{scaled[n][0]:.6g},{scaled[n][1]:.6g},{runs[n][2]},{runs[n][3]:.3f}" for n in baselines)
+            + ",".join(f"{b.relmse:.6g},{b.late_relmse:.6g},{b.spp},{b.seconds:.3f}" for b in (shipped, tuned))
             + f",{baselines['tuned']},{ratio:.6g},{late_ratio:.6g}"
         )
     lines.append("")

@@ -21,7 +21,7 @@ from pathlib import Path
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
-from render.lidar.table import rows_of, write_table
+from render.lidar.table import normalised_waveform, rows_of, write_table
 
 CONFIG = Path("configs/lidar/icesat2.yaml")
 GRAINS = {"d0.1mm": 0.0001, "d0.5mm": 0.0005, "d1mm": 0.001}
@@ -52,14 +52,10 @@ def plot_waveforms(folders: dict[str, Path], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     fig, ax = plt.subplots(figsize=(7, 4), dpi=150)
     for label, folder in folders.items():
-        with np.load(folder / "lidar" / "waveform.npz") as data:
-            height = float(data["reference_height"]) - data["range_m"]
-            pulsed = data["pulsed"][:, 0]
-        ax.plot(height, pulsed / pulsed.max(), label=label, lw=1.3)
+        ax.plot(*normalised_waveform(folder), label=label, lw=1.3)
     ax.axvline(0.0, color="0.5", ls=":", lw=0.8)
     ax.set_xlim(-1.5, 1.2)
     ax.set_xlabel("height of the return above the flat-equivalent surface [m]")

@@ -185,7 +185,7 @@ def _resolve_base(name: str, sweep_path: Path) -> Path:
     raise SweepError(f"{sweep_path}: base '{name}' was found neither next to the sweep file nor in {CONFIGS_DIR}")
 
 
-def _grid_points(grid: dict[str, Any]) -> list[PointSpec]:
+def _grid_points(grid: dict[str, Any], path: Path) -> list[PointSpec]:
     """Every combination of the grid's values, named ``<leaf>-<label>_<leaf>-<label>``."""
     axes = []
     for key, values in grid.items():
@@ -196,7 +196,7 @@ def _grid_points(grid: dict[str, Any]) -> list[PointSpec]:
         name = "_".join(f"{key.split('.')[-1]}-{label}" for key, label, _ in combination)
         if len(name) > MAX_POINT_NAME:
             raise SweepError(
-                f"grid point '{name}' has a name of {len(name)} characters, over {MAX_POINT_NAME}: shorten the "
+                f"{path}: grid point '{name}' has a name of {len(name)} characters, over {MAX_POINT_NAME}: shorten the "
                 "grid's labels (give a key's values as a mapping, label: value) or list the points"
             )
         points.append(PointSpec(name=name, set=[f"{key}={json.dumps(value)}" for key, _, value in combination]))
@@ -277,10 +277,7 @@ def load_sweep(path: str | Path) -> Sweep:
     if spec.points is not None:
         specs = spec.points
     elif spec.grid is not None:
-        try:
-            specs = _grid_points(spec.grid)
-        except SweepError as exc:
-            raise SweepError(f"{path}: {exc}") from None
+        specs = _grid_points(spec.grid, path)
     if not specs:
         raise SweepError(f"{path}: the sweep has no points")
     seen: dict[str, int] = {}

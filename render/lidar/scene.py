@@ -22,6 +22,8 @@ import numpy as np
 from render.scene.shapes import box_mesh
 
 Target = Literal["penitentes", "flat_snow", "bare"]
+# A snow solid's faces: index matched, medium 0 inside, the vacuum outside.
+_SNOW_FACES: dict[str, Any] = {"kind": "null", "interior": 0, "exterior": -1}
 
 
 @dataclass(frozen=True)
@@ -107,25 +109,21 @@ def shot_scene(
     """The core dict of a shot at ``target``: the grown field's solid ``mesh`` filled with ``snow`` (a medium
     dict), flat snow (a box ``depth`` deep under z = 0, twice the film's side wide) or a bare Lambertian
     surface of albedo ``bare_albedo`` at z = 0."""
-    half = receiver.side
-    cx, cy = receiver.centre
     if target == "penitentes":
         if mesh is None or snow is None:
             raise ValueError("a penitente shot needs the field's mesh and the snow medium")
         vertices, faces = mesh
-        shape = {"vertices": vertices, "faces": faces, "kind": "null", "interior": 0, "exterior": -1}
+        shape = {"vertices": vertices, "faces": faces, **_SNOW_FACES}
         media = [snow]
     elif target == "flat_snow":
         if snow is None:
             raise ValueError("a flat-snow shot needs the snow medium")
-        v, f = box_mesh((cx - half, cy - half, -depth), (cx + half, cy + half, 0.0))
-        shape = {"vertices": v, "faces": f, "kind": "null", "interior": 0, "exterior": -1}
+        shape = {**_box(receiver, receiver.side, depth), **_SNOW_FACES}
         media = [snow]
     elif target == "bare":
         if not 0 < bare_albedo <= 1:
             raise ValueError(f"lidar.bare_albedo must lie in (0, 1], got {bare_albedo}")
-        v, f = box_mesh((cx - half, cy - half, -depth), (cx + half, cy + half, 0.0))
-        shape = {"vertices": v, "faces": f, "kind": "diffuse", "albedo": (bare_albedo,) * 3}
+        shape = {**_box(receiver, receiver.side, depth), "kind": "diffuse", "albedo": (bare_albedo,) * 3}
         media = []
     else:
         raise ValueError(f"unknown lidar target '{target}': use penitentes, flat_snow or bare")
@@ -136,6 +134,13 @@ def shot_scene(
         "camera": receiver.camera(),
         "film": receiver.film(),
     }
+
+
+def _box(receiver: Receiver, half_width: float, depth: float) -> dict[str, Any]:
+    """The mesh of a box ``half_width`` on each side of the receiver's centre and ``depth`` deep under z = 0."""
+    cx, cy = receiver.centre
+    v, f = box_mesh((cx - half_width, cy - half_width, -depth), (cx + half_width, cy + half_width, 0.0))
+    return {"vertices": v, "faces": f}
 
 
 def bins_for(opl_span: float, bin_width_opl: float) -> int:
@@ -168,8 +173,7 @@ def flux_scene(
     if not 0 < gap < receiver.reference_height:
         raise ValueError(f"the emitter's gap {gap} m must lie between the snow and the reference plane")
     cx, cy = receiver.centre
-    v, f = box_mesh((cx - half_width, cy - half_width, -depth), (cx + half_width, cy + half_width, 0.0))
-    shapes: list[dict[str, Any]] = [{"vertices": v, "faces": f, "kind": "null", "interior": 0, "exterior": -1}]
+    shapes: list[dict[str, Any]] = [{**_box(receiver, half_width, depth), **_SNOW_FACES}]
     if rings is None:
         corners = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) * half_width
         shapes.append(_emitter(_fan(corners), (cx, cy), gap, (1.0, 1.0, 1.0)))
@@ -218,10 +222,3 @@ def _emitter(
         "exterior": -1,
         "radiance": radiance,
     }
-
-
-def polygon_area(shape: dict[str, Any]) -> float:
-    """The area of a shape's triangles [m²] (an emitter's, for its power)."""
-    v = np.asarray(shape["vertices"], dtype=np.float64).reshape(-1, 3)
-    f = np.asarray(shape["faces"], dtype=np.int64).reshape(-1, 3)
-    return float(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum())

@@ -16,7 +16,9 @@ import html
 import json
 from pathlib import Path
 
-from pipeline.atomic import atomic_path
+import numpy as np
+
+from pipeline.atomic import atomic_path, write_text_atomic
 
 COLUMNS = ("run", "target", "density", "grain_mm", "footprint_m", "channel", "estimator")
 
@@ -76,19 +78,16 @@ ESTIMATOR_COLUMNS = ("first_return", "peak", "gaussian_fit", "median", "centroid
 
 def compact_rows(rows: list[dict], channel: str, reference: str = "flat_equivalent") -> list[dict]:
     """One row per run: its inputs and every estimator's bias [cm] in ``channel`` against ``reference`` (the
-    README's table)."""
-    out: dict[str, dict] = {}
+    README's table), estimators from the leading edge to the tail."""
+    inputs: dict[str, dict] = {}
+    biases: dict[str, dict] = {}
     for row in rows:
-        if row["channel"] != channel:
-            continue
-        entry = out.setdefault(row["run"], {k: row[k] for k in COLUMNS if k not in ("channel", "estimator")})
-        entry[row["estimator"]] = row[f"bias_{reference}_cm"]
-    # Estimators from the leading edge to the tail, then any others.
-    order = {name: i for i, name in enumerate(ESTIMATOR_COLUMNS)}
-    return [
-        {k: v for k, v in sorted(entry.items(), key=lambda kv: (kv[0] in order, order.get(kv[0], 0)))}
-        for entry in out.values()
-    ]
+        if row["channel"] == channel:
+            inputs.setdefault(row["run"], {k: row[k] for k in COLUMNS if k not in ("channel", "estimator")})
+            biases.setdefault(row["run"], {})[row["estimator"]] = row[f"bias_{reference}_cm"]
+    order = [e for e in ESTIMATOR_COLUMNS if any(e in b for b in biases.values())]
+    order += [e for b in biases.values() for e in b if e not in order]
+    return [{**inputs[run], **{e: biases[run][e] for e in order if e in biases[run]}} for run in inputs]
 
 
 def write_sweep_summary(spec: dict) -> dict[str, Path]:
@@ -96,7 +95,7 @@ def write_sweep_summary(spec: dict) -> dict[str, Path]:
     ``biases.csv``/``.md`` (every point, channel, estimator and reference), ``summary.csv``/``.md``/``.html``
     (a row per point: 532 nm with Warren & Brandt ice against the flat-equivalent surface), ``poster.png``
     (every point's pulsed waveform) and ``report.html``, in the sweep's folder."""
-    from render.output.report import markdown_table_to_html
+    from render.output.report import html_page, markdown_table_to_html
 
     folder = Path(spec["folder"])
     runs = {name: Path(spec["runs_dir"]) / f"{spec['sweep']}-{name}" for name in spec["points"]}
@@ -108,12 +107,10 @@ def write_sweep_summary(spec: dict) -> dict[str, Path]:
     channel = rows[0]["channel"]
     csv_path, md_path = write_table(compact_rows(rows, channel), folder, "summary")
     table_html = markdown_table_to_html(md_path.read_text(encoding="utf-8"))
-    with atomic_path(folder / "summary.html") as tmp:
-        Path(tmp).write_text(table_html, encoding="utf-8")
+    title = f"Sweep '{spec['sweep']}': lidar range biases"
+    write_text_atomic(folder / "summary.html", html_page(title, table_html))
     _plot_sweep_waveforms(runs, folder / "poster.png")
-    parts = [f"<h1>Sweep '{html.escape(spec['sweep'])}': lidar range biases</h1>"]
-    if spec.get("description"):
-        parts.append(f"<p>{html.escape(spec['description'])}</p>")
+    parts = [f"<p>{html.escape(spec['description'])}</p>"] if spec.get("description") else []
     parts.append(
         f"<p>{len(runs)} points from <code>{html.escape(spec['sweep_file'])}</code>. Bias [cm] = the estimator's "
         f"range minus the range of the flat-equivalent surface, {html.escape(channel)}; positive: the surface "
@@ -125,10 +122,17 @@ def write_sweep_summary(spec: dict) -> dict[str, Path]:
         '<figure><img src="poster.png" alt="waveforms" style="max-width: 100%"><figcaption>pulsed waveforms, '
         f"{html.escape(channel)}, each over its peak</figcaption></figure>"
     )
-    page = "<!doctype html><meta charset='utf-8'><title>lidar sweep</title><body>" + "\n".join(parts) + "</body>"
-    with atomic_path(folder / "report.html") as tmp:
-        Path(tmp).write_text(page, encoding="utf-8")
+    write_text_atomic(folder / "report.html", html_page(title, "\n".join(parts)))
     return {"csv": csv_path, "md": md_path, "poster": folder / "poster.png", "report": folder / "report.html"}
+
+
+def normalised_waveform(run: Path, channel: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A run's pulsed waveform in ``channel`` over its peak, against the height of the return above the
+    flat-equivalent surface [m] (``run/lidar/waveform.npz``)."""
+    with np.load(run / "lidar" / "waveform.npz") as data:
+        height = float(data["reference_height"]) - data["range_m"]
+        pulsed = np.asarray(data["pulsed"][:, channel], dtype=np.float64)
+    return height, pulsed / pulsed.max() if pulsed.max() > 0 else pulsed
 
 
 def _plot_sweep_waveforms(runs: dict[str, Path], path: Path) -> None:
@@ -138,22 +142,19 @@ def _plot_sweep_waveforms(runs: dict[str, Path], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     panels: dict[str, list[tuple[str, np.ndarray, np.ndarray]]] = {}
     for run in runs.values():
         summary = json.loads((run / "lidar" / "summary.json").read_text())
         lidar = summary["config"]
-        with np.load(run / "lidar" / "waveform.npz") as data:
-            height = float(data["reference_height"]) - data["range_m"]
-            pulsed = np.asarray(data["pulsed"][:, 0], dtype=np.float64)
+        height, pulsed = normalised_waveform(run)
         key = f"{summary['target']}, {lidar['footprint_diameter']:g} m footprint"
         label = (
             f"albedo {lidar['bare_albedo']:g}"
             if summary["target"] == "bare"
             else f"{lidar['density']:g} kg/m³, {1000 * lidar['optical_diameter']:g} mm"
         )
-        panels.setdefault(key, []).append((label, height, pulsed / pulsed.max() if pulsed.max() > 0 else pulsed))
+        panels.setdefault(key, []).append((label, height, pulsed))
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), dpi=130, squeeze=False)
     for ax, (key, curves) in zip(axes[0], sorted(panels.items())):
         for label, height, pulsed in curves:

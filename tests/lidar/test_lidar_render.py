@@ -119,18 +119,23 @@ def diffusion_render():
     return diffusion_shot(30.0)
 
 
+def mean_path_of(returned, sigma_a: float) -> float:
+    """The mean in-snow path of what a half-space returns, from exact transport: returned(sigma_a) is the integral of
+    R_0(L) e^(-sigma_a L) dL, so <L> = -d ln returned / d sigma_a (a central difference)."""
+    h = 1e-3 * sigma_a
+    return -(math.log(returned(sigma_a + h)) - math.log(returned(sigma_a - h))) / (2 * h)
+
+
 def exact_nadir_mean_path(sigma_s: float, sigma_a: float) -> float:
     """The mean in-snow path of the light an isotropic half-space returns along the normal under normal
-    incidence, from exact transport: R(sigma_a) = integral of R_0(L) e^(-sigma_a L) dL, so <L> = -d ln R / d sigma_a,
-    with R = w H(1)^2 / (8 pi) (Chandrasekhar; render/lidar/LIDAR.md §7.5)."""
+    incidence, R = w H(1)^2 / (8 pi) (Chandrasekhar; render/lidar/LIDAR.md §7.5)."""
     from halfspace import chandrasekhar_h
 
-    def log_radiance(a: float) -> float:
+    def radiance(a: float) -> float:
         albedo = sigma_s / (sigma_s + a)
-        return math.log(albedo * float(chandrasekhar_h(albedo, nodes=800)(np.array(1.0))) ** 2)
+        return albedo * float(chandrasekhar_h(albedo, nodes=800)(np.array(1.0))) ** 2
 
-    h = 1e-3 * sigma_a
-    return -(log_radiance(sigma_a + h) - log_radiance(sigma_a - h)) / (2 * h)
+    return mean_path_of(radiance, sigma_a)
 
 
 def p1_nadir_mean_path(medium: diffusion.DiffusionMedium) -> float:
@@ -150,9 +155,7 @@ def test_area_integrated_return_has_the_diffusion_tail():
     -1.48 and 0.513. 120 s: -1.477 and 0.504. The nadir radiance under the zenith sun shares the asymptote but
     reaches the tail only through next-event estimation, and its fitted sigma_a scattered over 0.511-0.526 in
     two 120 s runs (0.48-0.61 at 30 s), so the flux carries the check."""
-    receiver = Receiver((0.0, 0.0), 0.1, 8, SURFACE_OPL / 2, 0.005, 2002)
-    scene = flux_scene(receiver, grey(1 / ELL, SIGMA_A), depth=1.0, half_width=0.5, gap=FLUX_GAP)
-    r = render(scene, settings(iterations=1_000_000, time_budget_s=120.0))
+    r, receiver = area_flux_shot(120.0)
     path = flux_path(receiver)
     energy = r.frames.mean(axis=(1, 2, 3)).astype(np.float64)
     fit = (path > 0.3) & (path < 2.0)
@@ -197,10 +200,30 @@ def test_area_integrated_return_has_the_exact_mean_path_and_total(diffusion_rend
 FLUX_GAP = 5e-5  # the emitters' height above the snow [m]
 
 
-def flux_path(receiver: Receiver) -> np.ndarray:
-    """The in-snow path [m] at the centre of each bin of a flux render: the camera's descent from the reference
-    plane plus the gap, crossed twice on average by light that leaves the emitters' cosine law (2 gap)."""
-    return (np.arange(receiver.temporal_bins) + 0.5) * receiver.bin_width_opl - receiver.reference_height - 2 * FLUX_GAP
+def flux_surface_opl(receiver: Receiver) -> float:
+    """The OPL of light turned back at the snow's surface in a flux render: the camera's descent from the
+    reference plane plus the gap, crossed twice on average by light that leaves the emitters' cosine law."""
+    return receiver.reference_height + 2 * FLUX_GAP
+
+
+def flux_path(receiver: Receiver, group: int = 1) -> np.ndarray:
+    """The in-snow path [m] at the centre of each bin of a flux render, or of each ``group`` of bins."""
+    n = receiver.temporal_bins // group
+    return (np.arange(n) + 0.5) * receiver.bin_width_opl * group - flux_surface_opl(receiver)
+
+
+def coarse(values: np.ndarray, group: int) -> np.ndarray:
+    """Sums over ``group`` consecutive bins (a trailing part left over is dropped)."""
+    n = len(values) // group
+    return values[: n * group].reshape(n, group).sum(axis=1)
+
+
+def area_flux_shot(seconds: float):
+    """The area-integrated flux: flat snow under one emitter as wide as the snow, an 8 x 8 film of 10 cm,
+    5 mm bins over 10 m of path."""
+    receiver = Receiver((0.0, 0.0), 0.1, 8, SURFACE_OPL / 2, 0.005, 2002)
+    scene = flux_scene(receiver, grey(1 / ELL, SIGMA_A), depth=1.0, half_width=0.5, gap=FLUX_GAP)
+    return render(scene, settings(iterations=1_000_000, time_budget_s=seconds)), receiver
 
 
 def exact_flux_albedo(sigma_s: float, sigma_a: float) -> float:
@@ -217,17 +240,12 @@ def test_flux_receiver_returns_the_exact_albedo_and_the_diffusion_mean_path():
     every direction, per metre of path (by reciprocity, the nadir radiance under a downward Lambertian emitter as
     wide as the snow). Its time integral is Chandrasekhar's flux albedo within 2 %, and its mean in-snow path is
     diffusion's closed form (LIDAR.md §3.6) within 5 % and exact transport's -d ln A / d sigma_a within 1.5 %."""
-    receiver = Receiver((0.0, 0.0), 0.1, 8, SURFACE_OPL / 2, 0.005, 2002)
-    scene = flux_scene(receiver, grey(1 / ELL, SIGMA_A), depth=1.0, half_width=0.5, gap=FLUX_GAP)
-    r = render(scene, settings(iterations=1_000_000, time_budget_s=15.0))
+    r, receiver = area_flux_shot(15.0)
     energy = r.frames.mean(axis=(1, 2, 3)).astype(np.float64)
     path = flux_path(receiver)
     total = float((r.frames.sum(axis=0) + r.early + r.late).mean())
     albedo = exact_flux_albedo(1 / ELL, SIGMA_A)
-    h = 1e-3 * SIGMA_A
-    exact = -(math.log(exact_flux_albedo(1 / ELL, SIGMA_A + h)) - math.log(exact_flux_albedo(1 / ELL, SIGMA_A - h))) / (
-        2 * h
-    )
+    exact = mean_path_of(lambda a: exact_flux_albedo(1 / ELL, a), SIGMA_A)
     closed = diffusion.mean_path_length(diffusion.DiffusionMedium(1 / ELL, SIGMA_A))
     mean = float((energy * path).sum() / energy.sum())
     print(
@@ -256,14 +274,13 @@ def ring_flux_theory(
     angle = 2 * np.pi * rng.random(samples)
     rho = np.hypot(px - radius * np.cos(angle), py - radius * np.sin(angle))
     area = math.pi * (outer**2 - inner**2)
-    surface = receiver.reference_height + 2 * FLUX_GAP
     w = receiver.bin_width_opl
     mean = diffusion.bin_average(
         lambda path: diffusion.reflectance(medium, rho[None, None, :], path[..., None]).mean(-1),
         0.0,
         w,
         receiver.temporal_bins,
-        surface_opl=surface,
+        surface_opl=flux_surface_opl(receiver),
         nodes=4,
     )
     return mean * w * area
@@ -272,18 +289,18 @@ def ring_flux_theory(
 def test_flux_scene_emitters_face_the_snow_and_refuse_bad_rings():
     """Every emitter triangle faces down (its emitting side), a ring's area is pi (outer^2 - inner^2) to the
     polygon's error, ring k emits in channel k alone, and rings that do not fit are refused by name."""
-    from render.lidar.scene import polygon_area
-
     receiver = Receiver((0.1, -0.2), 0.004, 4, 0.005, 0.002, 10)
     scene = flux_scene(receiver, grey(1.0, 1.0), depth=1.0, half_width=0.5, rings=[(0.0, 0.001), (0.014, 0.016)])
+    areas = []
     for k, shape in enumerate(scene["shapes"][1:]):
         v = np.asarray(shape["vertices"], dtype=np.float64)
         f = np.asarray(shape["faces"], dtype=np.int64)
         normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        areas.append(0.5 * np.linalg.norm(normals, axis=1).sum())
         assert np.all(normals[:, 2] < 0)
         assert shape["radiance"] == tuple(1.0 if c == k else 0.0 for c in range(3))
         assert np.allclose(v[:, 2], FLUX_GAP, atol=1e-9)
-    assert polygon_area(scene["shapes"][2]) == pytest.approx(math.pi * (0.016**2 - 0.014**2), rel=1e-3)
+    assert areas[1] == pytest.approx(math.pi * (0.016**2 - 0.014**2), rel=1e-3)
     with pytest.raises(ValueError, match="one to three rings"):
         flux_scene(receiver, grey(1.0, 1.0), depth=1.0, half_width=0.5, rings=[(0.0, 0.001)] * 4)
     with pytest.raises(ValueError, match="ring 0"):
@@ -317,10 +334,9 @@ def check_ring(shot, ell_ratio: int, bin_opl: float) -> None:
     r, receiver, rings, medium = shot
     channel = RING_ELL.index(ell_ratio)
     group = round(bin_opl / receiver.bin_width_opl)
-    n = receiver.temporal_bins // group
-    measured = r.frames[..., channel].astype(np.float64).mean(axis=(1, 2))[: n * group].reshape(n, group).sum(axis=1)
-    theory = ring_flux_theory(receiver, medium, rings[channel])[: n * group].reshape(n, group).sum(axis=1)
-    path = (np.arange(n) + 0.5) * bin_opl - receiver.reference_height - 2 * FLUX_GAP
+    measured = coarse(r.frames[..., channel].astype(np.float64).mean(axis=(1, 2)), group)
+    theory = coarse(ring_flux_theory(receiver, medium, rings[channel]), group)
+    path = flux_path(receiver, group)
     rho = ell_ratio * ELL
     strong = theory > 0.1 * theory.max()
     use = strong & (path > 4 * rho)
@@ -353,22 +369,18 @@ def test_spatially_resolved_flux_far_out():
 
 
 def mitransient_ring(receiver: Receiver, ring: tuple[float, float], spp: int, seed: int, folder) -> np.ndarray:
-    """The flux receiver's ring shot in mitransient (transient_prbvolpath, millimetres): the ring as an OBJ
-    emitter facing down ``FLUX_GAP`` above grey snow, Mitsuba's orthographic sensor over the receiver's film.
+    """The flux receiver's ring shot in mitransient (transient_prbvolpath, millimetres): flux_scene's ring written
+    as an OBJ emitter facing down ``FLUX_GAP`` above grey snow, Mitsuba's orthographic sensor over the receiver's film.
     Its OPL runs from the sensor's near plane, 0.1 mm below ours (a twentieth of a bin). Returns the
     pixel-mean waveform per bin (T,)."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("llvm_ad_rgb")
     import mitransient  # noqa: F401  (registers its plugins)
 
-    n = 128
-    angles = 2 * np.pi * np.arange(n) / n
-    rim = [np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1) for r in ring]
+    emitter = flux_scene(receiver, grey(1.0, 0.0), depth=1.0, half_width=0.5, rings=[ring], gap=FLUX_GAP)["shapes"][1]
     obj = Path(folder) / "ring.obj"
-    lines = [f"v {x * MT_UNITS} {y * MT_UNITS} {FLUX_GAP * MT_UNITS}" for x, y in np.vstack(rim)]
-    for i in range(n):  # wound to face down, as scene._annulus
-        j = (i + 1) % n
-        lines += [f"f {i + 1} {n + j + 1} {n + i + 1}", f"f {i + 1} {j + 1} {n + j + 1}"]
+    lines = [f"v {x} {y} {z}" for x, y, z in np.asarray(emitter["vertices"], dtype=np.float64) * MT_UNITS]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in emitter["faces"]]  # OBJ counts from 1
     obj.write_text("\n".join(lines) + "\n")
     scene = mitransient_snow_scene(mi, receiver, 1 / ELL, SIGMA_A, spp, 0.0)
     scene["ring"] = {
@@ -396,13 +408,8 @@ def test_the_early_edge_below_diffusion_is_transport_not_our_renderer(tmp_path):
     theirs = np.mean([mitransient_ring(receiver, ring, 16384, seed, tmp_path) for seed in range(4)], axis=0)
     theory = ring_flux_theory(receiver, medium, ring)
     group = 10
-    n = receiver.temporal_bins // group
-
-    def coarse(x: np.ndarray) -> np.ndarray:
-        return x[: n * group].reshape(n, group).sum(axis=1)
-
-    o, m, t = coarse(ours), coarse(theirs), coarse(theory)
-    path = (np.arange(n) + 0.5) * receiver.bin_width_opl * group - receiver.reference_height - 2 * FLUX_GAP
+    o, m, t = (coarse(x, group) for x in (ours, theirs, theory))
+    path = flux_path(receiver, group)
     use = (t > 0.1 * t.max()) & (path > 15 * ELL) & (path < 50 * ELL)  # the edge; later mitransient is noisy
     print(
         "(L - rho)/l*, ours/dipole, mitransient/dipole: "
