@@ -152,13 +152,33 @@ def face_mean(cell: np.ndarray, axis: int, step) -> np.ndarray:
     return 0.5 * (cell + neighbour)
 
 
-def _godunov_slopes(h: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def one_sided_slopes(h: np.ndarray, spacing: float, axis: int, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Backward and forward slopes of a periodic field along ``axis`` (1 = x, 0 = y) [-].
+
+    order 1: the plain differences D-h, D+h. order 2: ENO2 (Osher & Shu 1991), each difference corrected by
+    half a cell times the smaller of the two second differences on its side, so a smooth surface's slope is
+    second-order accurate and a kink (a crest, a trough) is not smeared across it (DESIGN.md 6.1)."""
+    forward = (np.roll(h, -1, axis=axis) - h) / spacing
+    backward = np.roll(forward, 1, axis=axis)
+    if order == 1:
+        return backward, forward
+    curvature = (forward - backward) / spacing
+    toward_back = np.roll(curvature, 1, axis=axis)
+    toward_front = np.roll(curvature, -1, axis=axis)
+    smaller_back = np.where(np.abs(curvature) <= np.abs(toward_back), curvature, toward_back)
+    smaller_front = np.where(np.abs(curvature) <= np.abs(toward_front), curvature, toward_front)
+    return backward + 0.5 * spacing * smaller_back, forward - 0.5 * spacing * smaller_front
+
+
+def _godunov_slopes(
+    h: np.ndarray, spacing: float, order: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Squared upwind slopes (x, y) of a receding surface (6.1) and the side (+1 east/north, -1
     west/south) of the downhill neighbour each one is taken to."""
-    back_x = np.maximum((h - np.roll(h, 1, axis=1)) / spacing, 0.0) ** 2
-    fwd_x = np.minimum((np.roll(h, -1, axis=1) - h) / spacing, 0.0) ** 2
-    back_y = np.maximum((h - np.roll(h, 1, axis=0)) / spacing, 0.0) ** 2
-    fwd_y = np.minimum((np.roll(h, -1, axis=0) - h) / spacing, 0.0) ** 2
+    back_x, fwd_x = one_sided_slopes(h, spacing, 1, order)
+    back_y, fwd_y = one_sided_slopes(h, spacing, 0, order)
+    back_x, fwd_x = np.maximum(back_x, 0.0) ** 2, np.minimum(fwd_x, 0.0) ** 2
+    back_y, fwd_y = np.maximum(back_y, 0.0) ** 2, np.minimum(fwd_y, 0.0) ** 2
     return (
         np.maximum(back_x, fwd_x),
         np.maximum(back_y, fwd_y),
@@ -168,7 +188,7 @@ def _godunov_slopes(h: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarr
 
 
 def surface_inverse_latent_heat(
-    h: np.ndarray, spacing: float, inverse_heat: np.ndarray, max_slope_deg: float
+    h: np.ndarray, spacing: float, inverse_heat: np.ndarray, max_slope_deg: float, order: int = 1
 ) -> tuple[np.ndarray, float]:
     """1/L_eff integrated over the surface a column exposes to sky and terrain light, per unit
     horizontal area [kg J-1]. The surface is the upwind true area sqrt(1 + |grad h|^2) of a normal
@@ -176,7 +196,7 @@ def surface_inverse_latent_heat(
     the rest (its wall faces) at the face means with the downhill neighbours. Where 1/L_eff is
     uniform this is 1/L_eff times the Godunov slope factor. Also returns the fraction of cells
     whose slope hit the clamp."""
-    grad2_x, grad2_y, side_x, side_y = _godunov_slopes(h, spacing)
+    grad2_x, grad2_y, side_x, side_y = _godunov_slopes(h, spacing, order)
     grad2 = grad2_x + grad2_y
     limit2 = np.tan(np.radians(max_slope_deg)) ** 2
     factor = np.sqrt(1.0 + np.minimum(grad2, limit2))
@@ -186,12 +206,15 @@ def surface_inverse_latent_heat(
 
 
 def sunward_slopes(
-    h: np.ndarray, spacing: float, sun: np.ndarray, max_slope_deg: float
+    h: np.ndarray, spacing: float, sun: np.ndarray, max_slope_deg: float, order: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
     """One-sided slopes (dh/dx, dh/dy) taken on the sun's side of each cell, the upwind differences of
-    the direct-beam lowering (see direct_beam_lowering), clamped in magnitude at ``max_slope_deg``."""
-    p = (np.roll(h, -1, axis=1) - h) / spacing if sun[0] >= 0 else (h - np.roll(h, 1, axis=1)) / spacing
-    q = (np.roll(h, -1, axis=0) - h) / spacing if sun[1] >= 0 else (h - np.roll(h, 1, axis=0)) / spacing
+    the direct-beam lowering (see direct_beam_lowering), clamped in magnitude at ``max_slope_deg``;
+    ``order`` 2 corrects them to second order (one_sided_slopes)."""
+    back_x, fwd_x = one_sided_slopes(h, spacing, 1, order)
+    back_y, fwd_y = one_sided_slopes(h, spacing, 0, order)
+    p = fwd_x if sun[0] >= 0 else back_x
+    q = fwd_y if sun[1] >= 0 else back_y
     grad = np.hypot(p, q)
     limit = np.tan(np.radians(max_slope_deg))
     scale = np.where(grad > limit, limit / np.maximum(grad, 1e-300), 1.0)
@@ -383,6 +406,7 @@ class GrowthSettings:
     wake_slope: float = 0.0  # [-]
     turbulent_share: float = 0.0  # share of sky_loss that stops where the air is still [-]
     efolding_depth: float = 0.0  # l [m], 0 = no penetration spreading
+    slope_order: int = 2  # 2: ENO2 slopes, 1: first-order upwind (DESIGN.md 6.1)
 
 
 @dataclass
@@ -430,7 +454,7 @@ def _period_energy(
         elevation = float(np.arcsin(vector[2]))
         s_b, s_d = s.sky.direct_normal(elevation), s.sky.diffuse_horizontal(elevation)
         flux_seconds += duration * (s_b * np.sin(elevation) + s_d) / s.scattered_reference_flux
-        p, q = sunward_slopes(h, spacing, vector, s.max_slope_deg)
+        p, q = sunward_slopes(h, spacing, vector, s.max_slope_deg, s.slope_order)
         lit = duration * s_b * irradiance.sun_visibility(h, spacing, vector)
         direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
         direct += lit * direct_beam_lowering(p, q, vector) / np.sqrt(1.0 + p * p + q * q)
@@ -487,12 +511,12 @@ def grow_field(
             t2 = time.perf_counter()
             volume_per_mass = s.ablation_efficiency / s.density  # [m3 kg-1]
             h_before = h.copy()
-            surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg)
+            surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg, s.slope_order)
             lowering = volume_per_mass * (direct_mass + diffuse * surface_heat)
             substeps = max(1, int(np.ceil(float(np.max(lowering)) / (s.cfl * spacing))))
             for step in range(substeps):
                 if step:
-                    surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg)
+                    surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg, s.slope_order)
                     lowering = volume_per_mass * (direct_mass + diffuse * surface_heat)
                 h -= lowering / substeps
                 clamp_sum, clamp_count = clamp_sum + clamped, clamp_count + 1
@@ -559,4 +583,5 @@ def settings_from_config(cfg) -> GrowthSettings:
         sky_loss=cfg.sky_loss,
         cfl=cfg.cfl,
         snapshots=cfg.snapshots,
+        slope_order=cfg.slope_order,
     )

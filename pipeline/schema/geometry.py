@@ -165,6 +165,12 @@ class GeometryConfig(StrictModel):
     azimuths: int = Field(16, ge=8, le=64, description="Horizon azimuths M [-].")
     bounces: int = Field(2, ge=0, le=8, description="Terrain-reflection (radiosity) bounces n_b [-].")
     cfl: float = Field(0.5, gt=0, le=1, description="Hamilton-Jacobi CFL number of the recession sub-steps [-].")
+    slope_order: Literal[1, 2] = Field(
+        2,
+        description="Order of the upwind slopes of the recession and the direct beam: 2 ENO2 (the default), 1 "
+        "first-order upwind, whose numerical diffusion shrinks with the cell and made the field follow the grid "
+        "(geometry/DESIGN.md 6.1, 7) [-].",
+    )
     snapshots: int = Field(24, ge=2, le=400, description="Height-field snapshots kept for the time-lapse [-].")
 
     # Mesh
