@@ -155,19 +155,24 @@ def face_mean(cell: np.ndarray, axis: int, step) -> np.ndarray:
 def one_sided_slopes(h: np.ndarray, spacing: float, axis: int, order: int) -> tuple[np.ndarray, np.ndarray]:
     """Backward and forward slopes of a periodic field along ``axis`` (1 = x, 0 = y) [-].
 
-    order 1: the plain differences D-h, D+h. order 2: ENO2 (Osher & Shu 1991), each difference corrected by
-    half a cell times the smaller of the two second differences on its side, so a smooth surface's slope is
-    second-order accurate and a kink (a crest, a trough) is not smeared across it (DESIGN.md 6.1)."""
+    order 1: the plain differences D-h, D+h. order 2: second-order ENO with a minmod switch (Osher & Shu 1991),
+    each difference corrected by half a cell times the minmod of the two second differences on its side, so a
+    smooth surface's slope is second-order accurate, a kink (a crest, a trough) is not smeared across it, and
+    cell-scale noise, whose second differences alternate in sign, falls back to first order (DESIGN.md 6.1)."""
     forward = (np.roll(h, -1, axis=axis) - h) / spacing
     backward = np.roll(forward, 1, axis=axis)
     if order == 1:
         return backward, forward
     curvature = (forward - backward) / spacing
-    toward_back = np.roll(curvature, 1, axis=axis)
-    toward_front = np.roll(curvature, -1, axis=axis)
-    smaller_back = np.where(np.abs(curvature) <= np.abs(toward_back), curvature, toward_back)
-    smaller_front = np.where(np.abs(curvature) <= np.abs(toward_front), curvature, toward_front)
-    return backward + 0.5 * spacing * smaller_back, forward - 0.5 * spacing * smaller_front
+    toward_back, toward_front = np.roll(curvature, 1, axis=axis), np.roll(curvature, -1, axis=axis)
+    back_correction = 0.5 * spacing * minmod(curvature, toward_back)
+    front_correction = 0.5 * spacing * minmod(curvature, toward_front)
+    return backward + back_correction, forward - front_correction
+
+
+def minmod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smaller in magnitude of a and b where they share a sign, else 0."""
+    return np.where(a * b > 0.0, np.where(np.abs(a) <= np.abs(b), a, b), 0.0)
 
 
 def _godunov_slopes(
@@ -511,12 +516,16 @@ def grow_field(
             t2 = time.perf_counter()
             volume_per_mass = s.ablation_efficiency / s.density  # [m3 kg-1]
             h_before = h.copy()
-            surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg, s.slope_order)
+            surface_heat, clamped = surface_inverse_latent_heat(
+                h, spacing, inverse_heat, s.max_slope_deg, s.slope_order
+            )
             lowering = volume_per_mass * (direct_mass + diffuse * surface_heat)
             substeps = max(1, int(np.ceil(float(np.max(lowering)) / (s.cfl * spacing))))
             for step in range(substeps):
                 if step:
-                    surface_heat, clamped = surface_inverse_latent_heat(h, spacing, inverse_heat, s.max_slope_deg, s.slope_order)
+                    surface_heat, clamped = surface_inverse_latent_heat(
+                        h, spacing, inverse_heat, s.max_slope_deg, s.slope_order
+                    )
                     lowering = volume_per_mass * (direct_mass + diffuse * surface_heat)
                 h -= lowering / substeps
                 clamp_sum, clamp_count = clamp_sum + clamped, clamp_count + 1

@@ -167,7 +167,7 @@ class GeometryConfig(StrictModel):
     cfl: float = Field(0.5, gt=0, le=1, description="Hamilton-Jacobi CFL number of the recession sub-steps [-].")
     slope_order: Literal[1, 2] = Field(
         2,
-        description="Order of the upwind slopes of the recession and the direct beam: 2 ENO2 (the default), 1 "
+        description="Order of the upwind slopes of the recession and the direct beam: 2 second-order ENO with a minmod switch (the default), 1 "
         "first-order upwind, whose numerical diffusion shrinks with the cell and made the field follow the grid "
         "(geometry/DESIGN.md 6.1, 7) [-].",
     )
