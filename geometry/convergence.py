@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Orders are measured when the three values converge monotonically; otherwise the scheme's formal order is
-# assumed: the recession is first-order upwind (DESIGN.md 6.1).
+# Orders are measured when the three values converge monotonically; otherwise first order is assumed, the
+# cautious choice: the minmod slopes are second order on smooth surfaces but first at extrema (DESIGN.md 6.1).
 SCHEME_ORDER = 1.0
 
 
@@ -27,7 +27,7 @@ def richardson(coarse: float, medium: float, fine: float, refinement: float = 2.
 
     The order p = log((f_medium - f_coarse) / (f_fine - f_medium)) / log(refinement) is measured when the two
     differences share a sign and shrink (monotone convergence), and kept within [0.5, 4]; otherwise the
-    scheme's order (first) is assumed and flagged. f0 = f_fine + (f_fine - f_medium) / (refinement^p - 1)."""
+    first order is assumed and flagged. f0 = f_fine + (f_fine - f_medium) / (refinement^p - 1)."""
     first, second = medium - coarse, fine - medium
     if second == 0.0:
         return Richardson(float(fine), SCHEME_ORDER, first == 0.0)

@@ -71,7 +71,7 @@ def six_seasons():
 def test_final_spacing_does_not_depend_on_the_seed(six_seasons):
     """V6: six seeds end within +-20 % of their mean crest spacing, each with spacing / height in 0.5-2 (the
     reference's V3 bound; 60-day Tapado season, 256^2 over 8 m as the demo; ~10 min with the lean test).
-    Measured: 1.14-1.38 m (-10 % ... +10 %), spacing/H 1.51-1.66."""
+    Measured: 1.06-1.26 m (-8.5 % ... +9.0 %), spacing/H 1.24-1.37."""
     spacings = np.array([s["crest_spacing_m"] for s in six_seasons])
     ratios = np.array([s["spacing_to_height"] for s in six_seasons])
     assert np.all(np.abs(spacings / spacings.mean() - 1) <= 0.2), spacings
@@ -79,13 +79,9 @@ def test_final_spacing_does_not_depend_on_the_seed(six_seasons):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 27: on the demo's 3.1 cm cells the six seeds lean 1.9-3.2 deg toward the equator against a "
-    "growth-weighted noon zenith of 8.1 deg, 4.9-6.3 deg short (512^2: 3.5-4.3 deg, seeds 1-3); DESIGN.md 7, V3",
-)
 def test_every_seed_leans_within_5_deg_of_the_noon_zenith(six_seasons):
-    """V3's lean for the six V6 seeds, each against its growth-weighted noon zenith angle, within 5 deg."""
+    """V3's lean for the six V6 seeds, each against its growth-weighted noon zenith angle, within 5 deg.
+    Measured: 3.8-4.9 deg toward the equator against 7.74-7.85 deg, 2.9-4.0 deg short (DESIGN.md 7, V3)."""
     leans = np.array([s["lean_north_deg"] for s in six_seasons])  # at 30 S the equator is north
     targets = np.array([s["lean_target_deg"] for s in six_seasons])
     assert np.all(np.abs(leans - targets) <= 5.0), (leans, targets)
