@@ -93,7 +93,7 @@ bench: setup ## Benchmarks: ray engine, geometry against grid size, PTPB against
 	$(PY) benchmarks/bench_ptpb.py
 	$(PY) benchmarks/bench_dense.py
 
-convergence: setup ## Grid convergence of the grown field: demo season on 128^2, 256^2, 512^2, seeds 1-3 (~30 min)
+convergence: setup ## Grid convergence of the grown field: demo season on 128^2, 256^2, 512^2, seeds 1-3 (~10 min)
 	$(PY) benchmarks/grid_convergence.py
 
 sweep: setup ## Run a config sweep (default configs/sweeps/default.yaml on 2 cores; SWEEP=..., CORES=...)

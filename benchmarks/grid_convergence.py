@@ -9,7 +9,7 @@ Run: .venv/bin/python benchmarks/grid_convergence.py [--grids 128 256 512] [--se
 Writes benchmarks/results/grid_convergence/<grid>_<seed>.json and .npz (the numbers and the final field
 of one run, reused unless --force) and
 benchmarks/results/grid_convergence.md. On 2 cores the default study (128^2, 256^2, 512^2 over 8 m, seeds
-1-3) takes about 25 minutes.
+1-3) takes about 10 minutes.
 """
 
 from __future__ import annotations
