@@ -216,6 +216,12 @@ class GeometryConfig(StrictModel):
                 "geometry.initial_correlation_length is null: a white-noise start steepens and loses its long waves "
                 "as the cells shrink, so the grown field follows the grid; set a correlation length (Tapado 0.15 m)"
             )
+        if self.slope_order == 1:
+            warnings.append(
+                "geometry.slope_order = 1: first-order upwind slopes carry a numerical diffusion that shrinks with "
+                "the cell, so the season runs late on coarse grids (6.25 cm cells: H and the albedo drop a third and "
+                "a half short); set geometry.slope_order: 2"
+            )
         return warnings
 
     @model_validator(mode="after")

@@ -72,6 +72,12 @@ def test_validate_warns_on_the_demo_at_64_cells():
     assert load_config(ROOT / "configs" / "demo.yaml").geometry.resolution_warnings() == []
 
 
+def test_validate_warns_on_first_order_slopes():
+    """DESIGN.md 6.1: the first-order scheme is kept for comparison, and validate says what it costs."""
+    cfg = load_config(ROOT / "configs" / "demo.yaml", ["geometry.slope_order=1"]).geometry
+    assert any("geometry.slope_order = 1" in w and "slope_order: 2" in w for w in cfg.resolution_warnings())
+
+
 def test_validate_warns_on_a_white_noise_start():
     cfg = GeometryConfig(initial_correlation_length=None, grid_cells=512)
     assert any("white-noise start" in w for w in cfg.resolution_warnings())
