@@ -18,9 +18,11 @@ ROOT = Path(__file__).resolve().parents[2]
 SITES = ROOT / "configs" / "presets" / "sites"
 
 
-def _season(grid: int) -> dict:
+def _season(grid: int, slope_order: int = 2) -> dict:
     site = load_raw(SITES / "tapado.yaml")["geometry"]
-    cfg = GeometryConfig(**{**site, "grid_cells": grid, "domain_size": 2.0, "days": 30, "snapshots": 2})
+    cfg = GeometryConfig(
+        **{**site, "grid_cells": grid, "domain_size": 2.0, "days": 30, "snapshots": 2, "slope_order": slope_order}
+    )
     rng = np.random.default_rng(1)
     h0 = ablation.initial_height_field_from_config(cfg, rng)
     h = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng).height
@@ -43,6 +45,16 @@ def test_the_field_settles_as_the_cells_halve(seasons):
         assert first * second > 0 and abs(second) < 0.8 * abs(first), (key, coarse, medium, fine)
     fine, medium = seasons[128]["height"][::2, ::2], seasons[64]["height"]
     assert np.corrcoef(fine.ravel(), medium.ravel())[0, 1] > 0.9
+
+
+def test_second_order_slopes_close_the_gap_between_grids(seasons):
+    """DESIGN.md 6.1, 7 (*Grid convergence*, item 4): the first-order scheme's numerical diffusion shrinks with the
+    cell, so its 64^2 season lags the 128^2 one; second-order slopes halve that lag (RMS relief on 2 m, 30 days,
+    seed 1: first order 9.53 against 11.44 cm, second order 12.36 against 13.30 cm)."""
+    first = {grid: _season(grid, slope_order=1)["rms"] for grid in (64, 128)}
+    second = {grid: seasons[grid]["rms"] for grid in (64, 128)}
+    assert first[128] - first[64] > 0 and second[128] - second[64] > 0
+    assert second[128] - second[64] < 0.6 * (first[128] - first[64]), (first, second)
 
 
 def test_richardson_recovers_a_known_limit():
