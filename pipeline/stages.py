@@ -109,7 +109,14 @@ def composite_stage(ctx: StageContext) -> dict:
     cfg = ctx.config.composite
     if cfg.title is None:
         cfg = cfg.model_copy(update={"title": run_title(ctx.config)})
-    return run_composite_stage(ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"], cfg, ctx.out_dir)
+    guides = None
+    if cfg.denoise:
+        from render.scene.guides import guide_buffers
+
+        guides = guide_buffers(ctx.inputs["scene"])
+    return run_composite_stage(
+        ctx.inputs["render"], ctx.inputs.get("reference"), ctx.inputs["scene"], cfg, ctx.out_dir, guides=guides
+    )
 
 
 def lidar_stage(ctx: StageContext) -> dict:

@@ -54,6 +54,19 @@ class CompositeConfig(StrictModel):
         description="Also write <stem>_10bit.mp4: the clip in 10-bit H.264 (High 10, yuv420p10le, BT.709 tags) for "
         "archiving and grading, beside the 8-bit web cut (render/output/LOOK.md) [-].",
     )
+    denoise: bool = Field(
+        False,
+        description="Deliver denoised frames: Intel Open Image Denoise on each frame, guided by the first camera "
+        "hit's albedo and normal, each frame keeping its raw sum (render/output/LOOK.md, *Denoised delivery*). The videos, streaks "
+        "and light in flight show them; frames_denoised.npy and exr_denoised/ hold them beside the raw exr/, and "
+        "raw_denoised.mp4/.png set the two side by side. Comparisons, guards and tables always read the raw "
+        "frames [-].",
+    )
+    denoise_quality: Literal["high", "balanced", "fast"] = Field(
+        "high",
+        description="Open Image Denoise's quality when denoise is on: on 2 cores a 1920 x 1080 frame takes about "
+        "4.6 s at high and 1.3 s at balanced [-].",
+    )
     exr_frames: bool = Field(
         False,
         description="Also write exr/frame_NNNN.exr, the linear frames with their OPL, time since first light, clip "

@@ -360,12 +360,13 @@ def composite_film(
     streaks: bool = False,
     steady: np.ndarray | None = None,
     exr_attributes: dict | None = None,
+    exr_folder: str = "exr",
     metres_per_pixel: float | None = None,
 ) -> tuple[dict[str, Path], dict[str, float]]:
     """Composite a (T, H, W, 3) stack (in memory or memory-mapped) in two passes over it: the videos
     (``videos``), the streak images (``streaks``), light in flight (given the ``steady`` image) and the EXR
-    frames (given their header's ``exr_attributes``: the clip exposure is added). Returns the paths written
-    and the exposures used (clip, cumulative, streak, steady)."""
+    frames (given their header's ``exr_attributes``: the clip exposure is added) into ``out_dir/exr_folder``.
+    Returns the paths written and the exposures used (clip, cumulative, streak, steady)."""
     statistics = FilmStatistics.measure(frames)
     fps = _frame_rate(cfg, film)
     count, height = frames.shape[0], frames.shape[1]
@@ -387,7 +388,7 @@ def composite_film(
             outputs.append(_LightInFlight(files, steady, statistics, count, film, cfg, out_dir, fps, labels))
         if exr_attributes is not None:
             outputs.append(
-                _ExrFrames(out_dir / "exr", film, {"penitentes:exposure": exposures["clip"], **exr_attributes})
+                _ExrFrames(out_dir / exr_folder, film, {"penitentes:exposure": exposures["clip"], **exr_attributes})
             )
         for first, window in frame_windows(frames):
             for k, frame in enumerate(window, start=first):
@@ -480,20 +481,25 @@ def side_by_side(
     return {"side_by_side_video": path, "side_by_side_still": still}
 
 
-def run_composite_stage(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path) -> dict:
+def run_composite_stage(
+    render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path, guides=None
+) -> dict:
     """The `composite` stage: videos and streak images of our frames, and ours against the reference.
 
     Reads ``render_dir/frames.npy`` (memory-mapped, a window at a time) and ``stats.json`` (the film),
     ``reference_dir/frames.npy`` when a transient reference exists, and the camera from
-    ``scene_dir/scene.json`` for the scale bar. The summary carries the exposures and the stage's own peak
-    memory (pipeline/memory.py).
+    ``scene_dir/scene.json`` for the scale bar. With ``cfg.denoise`` the videos show denoised frames, guided by
+    ``guides`` (render.output.denoise.Guides, which render.scene.guides traces). The summary carries the
+    exposures and the stage's own peak memory (pipeline/memory.py).
     """
+    if cfg.denoise and guides is None:
+        raise ValueError("composite.denoise needs the scene's guide buffers (render.scene.guides.guide_buffers)")
     with PeakMemory() as memory:
-        summary = _composite(render_dir, reference_dir, scene_dir, cfg, out_dir)
+        summary = _composite(render_dir, reference_dir, scene_dir, cfg, out_dir, guides)
     return {**summary, **memory.record()}
 
 
-def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path) -> dict:
+def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path, guides) -> dict:
     from render.scene.model import Scene, pixel_footprint
 
     ours = RenderOutputs.read(render_dir)
@@ -512,17 +518,23 @@ def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cf
     if cfg.exr_frames:
         manifest = render_dir / "manifest.json"
         config_hash = json.loads(manifest.read_text())["config_hash"] if manifest.is_file() else "unknown"
-        exr_attributes = {"penitentes:config_hash": config_hash}
+        exr_attributes = {"penitentes:config_hash": config_hash, "penitentes:frames": "raw"}
+    delivered, denoised = frames, None
+    if cfg.denoise:
+        delivered, denoised = _denoise(frames, film, cfg, guides, out_dir, exr_attributes)
     written, exposures = composite_film(
-        frames,
+        delivered,
         film,
         cfg,
         out_dir,
         streaks=True,
         steady=steady,
-        exr_attributes=exr_attributes,
+        exr_attributes=None if exr_attributes is None else {**exr_attributes, "penitentes:frames": delivered_kind(cfg)},
+        exr_folder="exr_denoised" if cfg.denoise else "exr",
         metres_per_pixel=metres_per_pixel,
     )
+    if denoised is not None:
+        written.update(denoised.pop("files"))
     reference_frames = RenderOutputs.read(reference_dir).frames(memory_mapped=True) if reference_dir else None
     if reference_frames is not None and reference_frames.shape == frames.shape:
         # mitransient's frames are bin integrals; gate frames are densities per metre (render/core/DESIGN.md §2).
@@ -542,4 +554,50 @@ def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cf
         "frames": int(frames.shape[0]),
         "frame_mode": film.frame_mode,
         "exposures": exposures,
+        **({"denoise": denoised} if denoised is not None else {}),
+    }
+
+
+def delivered_kind(cfg) -> str:
+    """What the videos, streaks and ``exr_denoised``/``exr`` frames of a composite show: raw or denoised."""
+    return "denoised" if cfg.denoise else "raw"
+
+
+def _denoise(
+    frames: np.ndarray, film: FrameAxis, cfg, guides, out_dir: Path, exr_attributes: dict | None
+) -> tuple[np.ndarray, dict]:
+    """The denoised delivery (render/output/LOOK.md, *Denoised delivery*): frames_denoised.npy, the raw frames' EXRs (``exr/``, the
+    delivered ones go to ``exr_denoised/``), raw and denoised side by side, the guides as a picture, and the
+    flicker of both stacks."""
+    import time
+
+    from render.output import denoise
+
+    start = time.perf_counter()
+    delivered = denoise.denoise_film(frames, guides, out_dir / "frames_denoised.npy", cfg.denoise_quality)
+    seconds = time.perf_counter() - start
+    files: dict[str, Path] = {"frames_denoised": out_dir / "frames_denoised.npy"}
+    files["denoise_guides"] = denoise.save_guides(guides, out_dir / "denoise_guides.png")
+    if exr_attributes is not None:
+        files.update(
+            {
+                f"raw_{k}": v
+                for k, v in composite_film(frames, film, cfg, out_dir, videos=False, exr_attributes=exr_attributes)[
+                    0
+                ].items()
+            }
+        )
+    pair = side_by_side(frames, delivered, ("raw", "denoised"), film, cfg, out_dir, stem="raw_denoised")
+    files.update({f"raw_denoised_{k}": v for k, v in pair.items()})
+    raw_sums = np.array([float(np.sum(frames[k], dtype=np.float64)) for k in range(frames.shape[0])])
+    denoised_sums = np.array([float(np.sum(delivered[k], dtype=np.float64)) for k in range(delivered.shape[0])])
+    lit = raw_sums > 0
+    return delivered, {
+        "seconds": seconds,
+        "largest_frame_sum_change": float(np.max(np.abs(denoised_sums[lit] / raw_sums[lit] - 1.0)))
+        if lit.any()
+        else 0.0,
+        "temporal_roughness_raw": denoise.temporal_roughness(frames),
+        "temporal_roughness_denoised": denoise.temporal_roughness(delivered),
+        "files": files,
     }
