@@ -542,11 +542,10 @@ def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cf
         written.update(
             side_by_side(frames, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg, out_dir, a_film=film)
         )
-        written.update(
-            transient_videos(
-                reference_frames, bins_film, cfg, out_dir, stem="reference_transient", metres_per_pixel=metres_per_pixel
-            )
+        reference_videos = transient_videos(
+            reference_frames, bins_film, cfg, out_dir, stem="reference_transient", metres_per_pixel=metres_per_pixel
         )
+        written.update({f"reference_{k}": v for k, v in reference_videos.items()})
     elif reference_frames is not None:
         log.warning("reference frames %s do not match ours %s; no side-by-side", reference_frames.shape, frames.shape)
     return {

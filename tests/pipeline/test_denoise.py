@@ -99,5 +99,6 @@ def test_raw_frames_stay_raw_and_the_headers_say_which(runs):
         assert image.spec().getattribute("penitentes:frames") == kind
         image.close()
     summary = json.loads((noisy / "composite" / "manifest.json").read_text())["summary"]
-    assert "raw_denoised.mp4" in summary["files"] and "denoise_guides.png" in summary["files"]
+    listed = set(summary["files"])
+    assert {"raw_denoised.mp4", "denoise_guides.png", "transient.mp4", "reference_transient.mp4"} <= listed, listed
     assert summary["denoise"]["largest_frame_sum_change"] < 1e-4
