@@ -411,7 +411,7 @@ class GrowthSettings:
     wake_slope: float = 0.0  # [-]
     turbulent_share: float = 0.0  # share of sky_loss that stops where the air is still [-]
     efolding_depth: float = 0.0  # l [m], 0 = no penetration spreading
-    slope_order: int = 2  # 2: ENO2 slopes, 1: first-order upwind (DESIGN.md 6.1)
+    slope_order: int = 2  # 2: second-order (minmod ENO) slopes, 1: first-order upwind (DESIGN.md 6.1)
 
 
 @dataclass

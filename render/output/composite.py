@@ -25,6 +25,7 @@ from PIL import Image
 
 from pipeline.atomic import atomic_path
 from pipeline.memory import PeakMemory
+from render.output.denoise import Guides
 from render.output.figures import ArrivalTimes, relative_difference, side_by_side_still, streak_image
 from render.output.files import FrameAxis, RenderOutputs, frame_windows
 from render.output.tonemap import LuminanceHistogram, display_values, exposure_scale, luminance, to_display
@@ -482,7 +483,7 @@ def side_by_side(
 
 
 def run_composite_stage(
-    render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path, guides=None
+    render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path, guides: Guides | None = None
 ) -> dict:
     """The `composite` stage: videos and streak images of our frames, and ours against the reference.
 
@@ -492,14 +493,14 @@ def run_composite_stage(
     ``guides`` (render.output.denoise.Guides, which render.scene.guides traces). The summary carries the
     exposures and the stage's own peak memory (pipeline/memory.py).
     """
-    if cfg.denoise and guides is None:
-        raise ValueError("composite.denoise needs the scene's guide buffers (render.scene.guides.guide_buffers)")
     with PeakMemory() as memory:
         summary = _composite(render_dir, reference_dir, scene_dir, cfg, out_dir, guides)
     return {**summary, **memory.record()}
 
 
-def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path, guides) -> dict:
+def _composite(
+    render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path, guides: Guides | None
+) -> dict:
     from render.scene.model import Scene, pixel_footprint
 
     ours = RenderOutputs.read(render_dir)
@@ -519,17 +520,19 @@ def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cf
         manifest = render_dir / "manifest.json"
         config_hash = json.loads(manifest.read_text())["config_hash"] if manifest.is_file() else "unknown"
         exr_attributes = {"penitentes:config_hash": config_hash, "penitentes:frames": "raw"}
-    delivered, denoised = frames, None
+    shown, denoised, delivered = frames, None, "raw"
     if cfg.denoise:
-        delivered, denoised = _denoise(frames, film, cfg, guides, out_dir, exr_attributes)
+        if guides is None:
+            raise ValueError("composite.denoise needs the scene's guide buffers (render.scene.guides.guide_buffers)")
+        shown, denoised, delivered = *_denoise(frames, film, cfg, guides, out_dir, exr_attributes), "denoised"
     written, exposures = composite_film(
-        delivered,
+        shown,
         film,
         cfg,
         out_dir,
         streaks=True,
         steady=steady,
-        exr_attributes=None if exr_attributes is None else {**exr_attributes, "penitentes:frames": delivered_kind(cfg)},
+        exr_attributes=None if exr_attributes is None else {**exr_attributes, "penitentes:frames": delivered},
         exr_folder="exr_denoised" if cfg.denoise else "exr",
         metres_per_pixel=metres_per_pixel,
     )
@@ -557,17 +560,12 @@ def _composite(render_dir: Path, reference_dir: Path | None, scene_dir: Path, cf
     }
 
 
-def delivered_kind(cfg) -> str:
-    """What the videos, streaks and ``exr_denoised``/``exr`` frames of a composite show: raw or denoised."""
-    return "denoised" if cfg.denoise else "raw"
-
-
 def _denoise(
-    frames: np.ndarray, film: FrameAxis, cfg, guides, out_dir: Path, exr_attributes: dict | None
+    frames: np.ndarray, film: FrameAxis, cfg, guides: Guides, out_dir: Path, exr_attributes: dict | None
 ) -> tuple[np.ndarray, dict]:
-    """The denoised delivery (render/output/LOOK.md, *Denoised delivery*): frames_denoised.npy, the raw frames' EXRs (``exr/``, the
-    delivered ones go to ``exr_denoised/``), raw and denoised side by side, the guides as a picture, and the
-    flicker of both stacks."""
+    """The denoised delivery (render/output/LOOK.md, *Denoised delivery*): frames_denoised.npy, the raw frames'
+    EXRs in ``exr/`` (the caller writes the delivered ones to ``exr_denoised/``), raw and denoised side by side,
+    the guides as a picture, and the flicker of both stacks."""
     import time
 
     from render.output import denoise
@@ -578,24 +576,17 @@ def _denoise(
     files: dict[str, Path] = {"frames_denoised": out_dir / "frames_denoised.npy"}
     files["denoise_guides"] = denoise.save_guides(guides, out_dir / "denoise_guides.png")
     if exr_attributes is not None:
-        files.update(
-            {
-                f"raw_{k}": v
-                for k, v in composite_film(frames, film, cfg, out_dir, videos=False, exr_attributes=exr_attributes)[
-                    0
-                ].items()
-            }
-        )
+        raw_exr = composite_film(frames, film, cfg, out_dir, videos=False, exr_attributes=exr_attributes)[0]
+        files.update({f"raw_{k}": v for k, v in raw_exr.items()})
     pair = side_by_side(frames, delivered, ("raw", "denoised"), film, cfg, out_dir, stem="raw_denoised")
     files.update({f"raw_denoised_{k}": v for k, v in pair.items()})
     raw_sums = np.array([float(np.sum(frames[k], dtype=np.float64)) for k in range(frames.shape[0])])
     denoised_sums = np.array([float(np.sum(delivered[k], dtype=np.float64)) for k in range(delivered.shape[0])])
     lit = raw_sums > 0
+    changes = np.abs(denoised_sums[lit] / raw_sums[lit] - 1.0)
     return delivered, {
         "seconds": seconds,
-        "largest_frame_sum_change": float(np.max(np.abs(denoised_sums[lit] / raw_sums[lit] - 1.0)))
-        if lit.any()
-        else 0.0,
+        "largest_frame_sum_change": float(changes.max()) if lit.any() else 0.0,
         "temporal_roughness_raw": denoise.temporal_roughness(frames),
         "temporal_roughness_denoised": denoise.temporal_roughness(delivered),
         "files": files,
