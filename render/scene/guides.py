@@ -17,18 +17,19 @@ from pathlib import Path
 import numpy as np
 
 from render.output.denoise import Guides
+from render.scene.model import Shape
 
 # Stratified camera rays per pixel side (4 x 4 = 16 rays): edges come out anti-aliased the way the rendered
 # frames' are, which the denoiser expects of its guides.
 GUIDE_SAMPLES = 4
 
 
-def _shape_albedo(shape: dict, optics: dict) -> np.ndarray:
-    if shape["kind"] == "diffuse":
-        return np.clip(np.asarray(shape.get("albedo") or (0.0, 0.0, 0.0), float), 0.0, 1.0)
-    medium = shape.get("interior")
-    if medium and medium in optics:
-        return np.clip(np.asarray(optics[medium]["derived"]["diffuse_albedo"], float), 0.0, 1.0)
+def _shape_albedo(shape: Shape, optics: dict) -> np.ndarray:
+    """What a guide ray sees of a shape: a diffuse surface's albedo, else r_d of the medium inside it (0 if none)."""
+    if shape.kind == "diffuse":
+        return np.clip(np.asarray(shape.albedo or (0.0, 0.0, 0.0), float), 0.0, 1.0)
+    if shape.interior and shape.interior in optics:
+        return np.clip(np.asarray(optics[shape.interior]["derived"]["diffuse_albedo"], float), 0.0, 1.0)
     return np.zeros(3)
 
 
@@ -48,7 +49,7 @@ def guide_buffers(scene_dir: str | Path, samples: int = GUIDE_SAMPLES) -> Guides
     albedos = []
     for index, (shape, core_shape) in enumerate(zip(scene.shapes, core["shapes"], strict=True)):
         engine.add_mesh(core_shape["vertices"], core_shape["faces"], index)
-        albedos.append(_shape_albedo({"kind": shape.kind, "albedo": shape.albedo, "interior": shape.interior}, optics))
+        albedos.append(_shape_albedo(shape, optics))
     engine.commit()
     camera = scene.camera
     width, height = camera.width, camera.height
