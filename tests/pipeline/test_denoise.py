@@ -4,6 +4,7 @@ raw frames do, raw and denoised EXRs that say which is which, and raw frames tha
 
 from __future__ import annotations
 
+import csv
 import hashlib
 import json
 
@@ -37,7 +38,7 @@ def _run(tmp_path, name: str, iterations: int, seed: int, composite: dict | None
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     # The composite stage waits for the reference (it sets ours beside mitransient when one exists).
-    stages = ("scene", "reference", "render", "composite") if composite else ("scene", "render")
+    stages = ("scene", "reference", "render", "composite", "compare") if composite else ("scene", "render")
     results = run_stages(load_config(path), STAGES, only=stages, quiet=True)
     assert all(r.status == "ran" for r in results if r.name in stages), results
     return tmp_path / "runs" / name
@@ -49,6 +50,24 @@ def runs(tmp_path_factory):
     noisy = _run(tmp_path, "noisy", 4, seed=5, composite={"denoise": True, "exr_frames": True})
     long = _run(tmp_path, "long", 64, seed=6)
     return noisy, long
+
+
+def test_the_comparison_rows_do_not_see_the_denoiser(runs, tmp_path):
+    """The same run with denoising off gives the same comparison rows (errors, means, agreement), the timing and
+    memory columns aside."""
+    noisy, _ = runs
+    plain = _run(tmp_path, "noisy", 4, seed=5, composite={"denoise": False, "exr_frames": True})
+
+    def rows(run):
+        with open(run / "compare" / "comparison.csv", newline="") as f:
+            return [
+                {k: v for k, v in row.items() if k not in ("seconds", "peak_memory_mib")} for row in csv.DictReader(f)
+            ]
+
+    compared = rows(noisy)
+    assert any(row["relmse"] not in ("", "–") for row in compared), compared
+    assert rows(plain) == compared
+    assert not (plain / "composite" / "frames_denoised.npy").exists()
 
 
 def test_guides_are_the_first_hit_of_the_scene(runs):
