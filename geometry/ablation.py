@@ -464,7 +464,9 @@ def _period_energy(
         direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
         direct += lit * direct_beam_lowering(p, q, vector) / np.sqrt(1.0 + p * p + q * q)
         sky += duration * s_d * horizons.sky_view
-    terrain = irradiance.bounce_terrain_light(direct + sky, s.albedo, spacing, horizons, s.bounces)
+    terrain = irradiance.bounce_terrain_light(
+        direct + sky, s.albedo, spacing, horizons, s.bounces, irradiance.true_area(h, spacing)
+    )
     absorbed = absorptance * (direct + sky + terrain)
     # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
     share = float(sun.durations[chunk].sum() / sun.durations.sum())

@@ -294,13 +294,28 @@ def terrain_irradiance(radiosity: np.ndarray, spacing: float, horizons: Horizons
 
 
 def bounce_terrain_light(
-    primary: np.ndarray, albedo: float, spacing: float, horizons: Horizons, bounces: int
+    primary: np.ndarray,
+    albedo: float,
+    spacing: float,
+    horizons: Horizons,
+    bounces: int,
+    area: np.ndarray | None = None,
 ) -> np.ndarray:
     """Terrain-reflected irradiance after ``bounces`` Jacobi gathers, given the primary (direct +
-    sky) irradiance per unit true area. Lambertian snow: radiosity = albedo * total irradiance."""
+    sky) irradiance per unit true area. Lambertian snow: radiosity = albedo * total irradiance.
+
+    With ``area`` (true area per unit horizontal area of each cell) every gather is scaled so that the light
+    the field receives from its terrain equals the light its facets send into it, sum of B (1 - V_sky) area
+    (DESIGN.md 3.6): the two-sample gather alone received 7-18 % more than was sent on steep walls."""
     terrain = np.zeros_like(primary)
     for _ in range(bounces):
-        terrain = terrain_irradiance(albedo * (primary + terrain), spacing, horizons)
+        radiosity = albedo * (primary + terrain)
+        terrain = terrain_irradiance(radiosity, spacing, horizons)
+        if area is not None:
+            received = float(np.sum(terrain * area))
+            sent = float(np.sum(radiosity * (1.0 - horizons.sky_view) * area))
+            if received > 0.0:
+                terrain *= sent / received
     return terrain
 
 
@@ -337,9 +352,15 @@ def radiation_budget(
     cos_incidence = np.clip(unit_normals(h, spacing) @ sun, 0.0, None)
     direct = direct_normal * cos_incidence * visible
     sky = diffuse_horizontal * horizons.sky_view
-    terrain = bounce_terrain_light(direct + sky, albedo, spacing, horizons, bounces)
+    terrain = bounce_terrain_light(direct + sky, albedo, spacing, horizons, bounces, true_area(h, spacing))
     total = direct + sky + terrain
     return RadiationBudget(direct, sky, terrain, (1.0 - albedo) * total, albedo * total, visible)
+
+
+def true_area(h: np.ndarray, spacing: float) -> np.ndarray:
+    """True surface area per unit horizontal area of each cell, sqrt(1 + |grad h|^2) from central slopes [-]."""
+    p, q = gradient(h, spacing)
+    return np.sqrt(1.0 + p * p + q * q)
 
 
 def field_albedo(
@@ -347,8 +368,7 @@ def field_albedo(
 ) -> tuple[float, float]:
     """Broadband albedo of the field [-]: radiosity escaping to the sky through the top plane over
     the incident flux. Also returns the energy-closure error (absorbed + escaped - incident)/incident."""
-    p, q = gradient(h, spacing)
-    area = np.sqrt(1.0 + p * p + q * q)  # true area per unit horizontal area
+    area = true_area(h, spacing)
     escaped = float(np.mean(budget.radiosity * horizons.sky_view * area))
     absorbed = float(np.mean(budget.absorbed * area))
     return escaped / incident_horizontal, (absorbed + escaped - incident_horizontal) / incident_horizontal

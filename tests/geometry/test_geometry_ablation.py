@@ -172,7 +172,7 @@ def test_thin_north_south_walls_fall_and_east_west_walls_stand():
     """Cathles et al. 2014 / Warren 2023 on a grid of square pits (0.8 m deep, 0.81 m apart) walled by
     walls 12.5 cm thick (twice the e-folding depth, four 3.1 cm cells) both ways, Tapado for 10 days from
     25 Nov: the morning and evening sun on the N-S walls' faces brings them down to the floor while the
-    E-W walls stand (measured 0.60 m against 0.03 m; after 8 days 0.67 m against 0.23 m: light spread over l
+    E-W walls stand (measured 0.72 m against 0.17 m; after 8 days 0.74 m against 0.35 m: light spread over l
     thins every wall a little, DESIGN.md 3.10, and the second-order slopes no longer round the walls, 6.1)."""
     cfg = GeometryConfig(
         **{

@@ -37,8 +37,8 @@ def seasons():
 
 def test_the_field_settles_as_the_cells_halve(seasons):
     """RMS relief and mean sky view converge monotonically: each halving of the cell moves them less than the
-    one before (on 2 m, 30 days into the season, seed 1, measured 9.4, 12.4, 13.3 cm RMS: steps of 3.0 and
-    0.9 cm), and the 128^2 field seen on the 64^2 nodes is the 64^2 field (the same forms in the same places)."""
+    one before (on 2 m, 30 days into the season, seed 1, measured 9.1, 12.2, 13.2 cm RMS: steps of 3.1 and
+    1.0 cm), and the 128^2 field seen on the 64^2 nodes is the 64^2 field (the same forms in the same places)."""
     for key in ("rms", "sky_view"):
         coarse, medium, fine = (seasons[g][key] for g in (32, 64, 128))
         first, second = medium - coarse, fine - medium
@@ -50,7 +50,7 @@ def test_the_field_settles_as_the_cells_halve(seasons):
 def test_second_order_slopes_close_the_gap_between_grids(seasons):
     """DESIGN.md 6.1, 7 (*Grid convergence*, item 4): the first-order scheme's numerical diffusion shrinks with the
     cell, so its 64^2 season lags the 128^2 one; second-order slopes halve that lag (RMS relief on 2 m, 30 days,
-    seed 1: first order 9.53 against 11.44 cm, second order 12.36 against 13.30 cm)."""
+    seed 1: first order 9.40 against 11.36 cm, second order 12.21 against 13.18 cm)."""
     first = {grid: _season(grid, slope_order=1)["rms"] for grid in (64, 128)}
     second = {grid: seasons[grid]["rms"] for grid in (64, 128)}
     assert first[128] - first[64] > 0 and second[128] - second[64] > 0

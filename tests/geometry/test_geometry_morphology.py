@@ -61,8 +61,8 @@ def test_aspects_peak_north_and_south(tapado):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="issue 27: with second-order slopes the 65 S control grows 0.216 m of RMS relief against Tapado's 0.406 m "
-    "(53 %; 58 % on 1.6 cm cells); first-order upwind gave 23 %, its numerical diffusion damping the weaker growth. "
+    reason="issue 27: with second-order slopes the 65 S control grows 0.214 m of RMS relief against Tapado's 0.397 m "
+    "(54 %; 58 % on 1.6 cm cells); first-order upwind gave 23 %, its numerical diffusion damping the weaker growth. "
     "The melt switch drives growth at both latitudes (melt off: neither grows); DESIGN.md 7, V3",
 )
 def test_65s_grows_no_comparable_relief(tapado, high_latitude):
@@ -148,5 +148,4 @@ def test_field_albedo_drop_against_warren_and_the_v_groove(tapado):
     groove = irradiance.v_groove_albedo(cfg.albedo, shape["crest_spacing_m"], shape["crest_to_trough_m"])
     assert 0.1 <= -noon["albedo_difference"] <= 0.4, noon
     assert noon["field_albedo"] <= groove + 0.02, (noon["field_albedo"], groove)
-    # The height-field radiation solver's closure degrades on sharp, steep walls (measured 0.078; DESIGN.md 7, V4).
-    assert abs(noon["albedo_energy_closure"]) < 0.1
+    assert abs(noon["albedo_energy_closure"]) < 0.05  # measured -0.017 with the energy-conserving gather (3.6)
