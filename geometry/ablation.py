@@ -175,13 +175,27 @@ def minmod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(a * b > 0.0, np.where(np.abs(a) <= np.abs(b), a, b), 0.0)
 
 
+@dataclass(frozen=True)
+class OneSidedSlopes:
+    """Backward and forward slopes of a field along x (east) and y (north), one_sided_slopes of each axis."""
+
+    back_x: np.ndarray
+    fwd_x: np.ndarray
+    back_y: np.ndarray
+    fwd_y: np.ndarray
+
+    @classmethod
+    def of(cls, h: np.ndarray, spacing: float, order: int) -> OneSidedSlopes:
+        return cls(*one_sided_slopes(h, spacing, 1, order), *one_sided_slopes(h, spacing, 0, order))
+
+
 def _godunov_slopes(
     h: np.ndarray, spacing: float, order: int = 1
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Squared upwind slopes (x, y) of a receding surface (6.1) and the side (+1 east/north, -1
     west/south) of the downhill neighbour each one is taken to."""
-    back_x, fwd_x = one_sided_slopes(h, spacing, 1, order)
-    back_y, fwd_y = one_sided_slopes(h, spacing, 0, order)
+    slopes = OneSidedSlopes.of(h, spacing, order)
+    back_x, fwd_x, back_y, fwd_y = slopes.back_x, slopes.fwd_x, slopes.back_y, slopes.fwd_y
     back_x, fwd_x = np.maximum(back_x, 0.0) ** 2, np.minimum(fwd_x, 0.0) ** 2
     back_y, fwd_y = np.maximum(back_y, 0.0) ** 2, np.minimum(fwd_y, 0.0) ** 2
     return (
@@ -216,10 +230,13 @@ def sunward_slopes(
     """One-sided slopes (dh/dx, dh/dy) taken on the sun's side of each cell, the upwind differences of
     the direct-beam lowering (see direct_beam_lowering), clamped in magnitude at ``max_slope_deg``;
     ``order`` 2 corrects them to second order (one_sided_slopes)."""
-    back_x, fwd_x = one_sided_slopes(h, spacing, 1, order)
-    back_y, fwd_y = one_sided_slopes(h, spacing, 0, order)
-    p = fwd_x if sun[0] >= 0 else back_x
-    q = fwd_y if sun[1] >= 0 else back_y
+    return sunward_of(OneSidedSlopes.of(h, spacing, order), sun, max_slope_deg)
+
+
+def sunward_of(slopes: OneSidedSlopes, sun: np.ndarray, max_slope_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """sunward_slopes from a field's one-sided slopes, which a frozen period computes once for all its suns."""
+    p = slopes.fwd_x if sun[0] >= 0 else slopes.back_x
+    q = slopes.fwd_y if sun[1] >= 0 else slopes.back_y
     grad = np.hypot(p, q)
     limit = np.tan(np.radians(max_slope_deg))
     scale = np.where(grad > limit, limit / np.maximum(grad, 1e-300), 1.0)
@@ -454,19 +471,18 @@ def _period_energy(
     direct = np.zeros_like(h)  # per true area
     sky = np.zeros_like(h)
     flux_seconds = 0.0
+    slopes = OneSidedSlopes.of(h, spacing, s.slope_order)  # the geometry is frozen for the period
     for j in chunk:
         vector, duration = sun.vectors[j], float(sun.durations[j])
         elevation = float(np.arcsin(vector[2]))
         s_b, s_d = s.sky.direct_normal(elevation), s.sky.diffuse_horizontal(elevation)
         flux_seconds += duration * (s_b * np.sin(elevation) + s_d) / s.scattered_reference_flux
-        p, q = sunward_slopes(h, spacing, vector, s.max_slope_deg, s.slope_order)
+        p, q = sunward_of(slopes, vector, s.max_slope_deg)
         lit = duration * s_b * irradiance.sun_visibility(h, spacing, vector)
         direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
         direct += lit * direct_beam_lowering(p, q, vector) / np.sqrt(1.0 + p * p + q * q)
         sky += duration * s_d * horizons.sky_view
-    terrain = irradiance.bounce_terrain_light(
-        direct + sky, s.albedo, spacing, horizons, s.bounces, irradiance.true_area(h, spacing)
-    )
+    terrain = irradiance.bounce_terrain_light(direct + sky, s.albedo, spacing, horizons, s.bounces)
     absorbed = absorptance * (direct + sky + terrain)
     # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
     share = float(sun.durations[chunk].sum() / sun.durations.sum())

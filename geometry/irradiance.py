@@ -119,7 +119,8 @@ class Horizons:
     a level receiver at each point, mean of cos^2 of the (non-negative) horizon elevation [-];
     shelter: (N, N) mean over azimuths of the tangent of that non-negative horizon elevation, the
     terrain shelter index Sx of Winstral et al. (2002) averaged over wind directions [-]. Openness
-    departs from 1 only at second order in the horizon angle, shelter at first order.
+    departs from 1 only at second order in the horizon angle, shelter at first order. true_area: (N, N)
+    surface area per unit horizontal area of each facet, sqrt(1 + |grad h|^2) from central slopes [-].
     """
 
     azimuths: np.ndarray
@@ -128,6 +129,7 @@ class Horizons:
     terrain_weight: np.ndarray
     openness: np.ndarray
     shelter: np.ndarray
+    true_area: np.ndarray
 
 
 def _sector_sky(tan_horizon: np.ndarray, slope_along: np.ndarray, cos_slope: np.ndarray) -> np.ndarray:
@@ -265,7 +267,7 @@ def compute_horizons(
     # Everything in the hemisphere that is not sky is snow: scale sectors to sum to 1 - V_sky.
     scale = np.divide(1.0 - sky_view, total, out=np.zeros_like(total), where=total > 1e-12)
     terrain_weight = (terrain * scale).astype(np.float32)
-    return Horizons(azimuths, distance, sky_view, terrain_weight, openness, shelter)
+    return Horizons(azimuths, distance, sky_view, terrain_weight, openness, shelter, 1.0 / cos_slope)
 
 
 # Where the seen radiosity is sampled, as fractions of the view-weighted distance; two samples
@@ -294,28 +296,22 @@ def terrain_irradiance(radiosity: np.ndarray, spacing: float, horizons: Horizons
 
 
 def bounce_terrain_light(
-    primary: np.ndarray,
-    albedo: float,
-    spacing: float,
-    horizons: Horizons,
-    bounces: int,
-    area: np.ndarray | None = None,
+    primary: np.ndarray, albedo: float, spacing: float, horizons: Horizons, bounces: int
 ) -> np.ndarray:
     """Terrain-reflected irradiance after ``bounces`` Jacobi gathers, given the primary (direct +
     sky) irradiance per unit true area. Lambertian snow: radiosity = albedo * total irradiance.
 
-    With ``area`` (true area per unit horizontal area of each cell) every gather is scaled so that the light
-    the field receives from its terrain equals the light its facets send into it, sum of B (1 - V_sky) area
-    (DESIGN.md 3.6): the two-sample gather alone received 7-18 % more than was sent on steep walls."""
+    Every gather is scaled so that the light the field receives from its terrain equals the light its facets
+    send into it, the sum of B (1 - V_sky) over the true area (DESIGN.md 3.6): the two-sample gather alone
+    received 7-18 % more than was sent on steep walls."""
+    area = horizons.true_area
     terrain = np.zeros_like(primary)
     for _ in range(bounces):
         radiosity = albedo * (primary + terrain)
         terrain = terrain_irradiance(radiosity, spacing, horizons)
-        if area is not None:
-            received = float(np.sum(terrain * area))
-            sent = float(np.sum(radiosity * (1.0 - horizons.sky_view) * area))
-            if received > 0.0:
-                terrain *= sent / received
+        received = float(np.sum(terrain * area))
+        if received > 0.0:
+            terrain *= float(np.sum(radiosity * (1.0 - horizons.sky_view) * area)) / received
     return terrain
 
 
@@ -352,23 +348,15 @@ def radiation_budget(
     cos_incidence = np.clip(unit_normals(h, spacing) @ sun, 0.0, None)
     direct = direct_normal * cos_incidence * visible
     sky = diffuse_horizontal * horizons.sky_view
-    terrain = bounce_terrain_light(direct + sky, albedo, spacing, horizons, bounces, true_area(h, spacing))
+    terrain = bounce_terrain_light(direct + sky, albedo, spacing, horizons, bounces)
     total = direct + sky + terrain
     return RadiationBudget(direct, sky, terrain, (1.0 - albedo) * total, albedo * total, visible)
 
 
-def true_area(h: np.ndarray, spacing: float) -> np.ndarray:
-    """True surface area per unit horizontal area of each cell, sqrt(1 + |grad h|^2) from central slopes [-]."""
-    p, q = gradient(h, spacing)
-    return np.sqrt(1.0 + p * p + q * q)
-
-
-def field_albedo(
-    h: np.ndarray, spacing: float, budget: RadiationBudget, horizons: Horizons, incident_horizontal: float
-) -> tuple[float, float]:
+def field_albedo(budget: RadiationBudget, horizons: Horizons, incident_horizontal: float) -> tuple[float, float]:
     """Broadband albedo of the field [-]: radiosity escaping to the sky through the top plane over
     the incident flux. Also returns the energy-closure error (absorbed + escaped - incident)/incident."""
-    area = true_area(h, spacing)
+    area = horizons.true_area
     escaped = float(np.mean(budget.radiosity * horizons.sky_view * area))
     absorbed = float(np.mean(budget.absorbed * area))
     return escaped / incident_horizontal, (absorbed + escaped - incident_horizontal) / incident_horizontal

@@ -28,7 +28,7 @@ def noon_radiation_metrics(h: np.ndarray, spacing: float, cfg: GeometryConfig, d
     s_b, s_d = sky.direct_normal(elevation), sky.diffuse_horizontal(elevation)
     horizons = irradiance.compute_horizons(h, spacing, max(cfg.azimuths, 24))
     budget = irradiance.radiation_budget(h, spacing, sun, s_b, s_d, cfg.albedo, horizons, max(cfg.bounces, 3))
-    albedo, closure = irradiance.field_albedo(h, spacing, budget, horizons, s_b * np.sin(elevation) + s_d)
+    albedo, closure = irradiance.field_albedo(budget, horizons, s_b * np.sin(elevation) + s_d)
     return {
         "field_albedo": albedo,
         "flat_albedo": cfg.albedo,

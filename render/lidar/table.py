@@ -21,6 +21,8 @@ import numpy as np
 from pipeline.atomic import atomic_path, write_text_atomic
 
 COLUMNS = ("run", "target", "density", "grain_mm", "footprint_m", "channel", "estimator")
+# The estimators from the leading edge to the tail: the compact table's columns (compact_rows).
+ESTIMATOR_COLUMNS = ("first_return", "peak", "gaussian_fit", "median", "centroid")
 
 
 def rows_of(run: Path) -> list[dict]:
@@ -71,9 +73,6 @@ def write_table(rows: list[dict], out: Path, stem: str = "biases") -> tuple[Path
     with atomic_path(out / f"{stem}.md") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n", encoding="utf-8")
     return out / f"{stem}.csv", out / f"{stem}.md"
-
-
-ESTIMATOR_COLUMNS = ("first_return", "peak", "gaussian_fit", "median", "centroid")
 
 
 def compact_rows(rows: list[dict], channel: str, reference: str = "flat_equivalent") -> list[dict]:

@@ -571,23 +571,19 @@ def _denoise(
     from render.output import denoise
 
     start = time.perf_counter()
-    delivered = denoise.denoise_film(frames, guides, out_dir / "frames_denoised.npy", cfg.denoise_quality)
+    film_out = denoise.denoise_film(frames, guides, out_dir / "frames_denoised.npy", cfg.denoise_quality)
     seconds = time.perf_counter() - start
     files: dict[str, Path] = {"frames_denoised": out_dir / "frames_denoised.npy"}
     files["denoise_guides"] = denoise.save_guides(guides, out_dir / "denoise_guides.png")
     if exr_attributes is not None:
         raw_exr = composite_film(frames, film, cfg, out_dir, videos=False, exr_attributes=exr_attributes)[0]
         files.update({f"raw_{k}": v for k, v in raw_exr.items()})
-    pair = side_by_side(frames, delivered, ("raw", "denoised"), film, cfg, out_dir, stem="raw_denoised")
+    pair = side_by_side(frames, film_out.frames, ("raw", "denoised"), film, cfg, out_dir, stem="raw_denoised")
     files.update({f"raw_denoised_{k}": v for k, v in pair.items()})
-    raw_sums = np.array([float(np.sum(frames[k], dtype=np.float64)) for k in range(frames.shape[0])])
-    denoised_sums = np.array([float(np.sum(delivered[k], dtype=np.float64)) for k in range(delivered.shape[0])])
-    lit = raw_sums > 0
-    changes = np.abs(denoised_sums[lit] / raw_sums[lit] - 1.0)
-    return delivered, {
+    return film_out.frames, {
         "seconds": seconds,
-        "largest_frame_sum_change": float(changes.max()) if lit.any() else 0.0,
-        "temporal_roughness_raw": denoise.temporal_roughness(frames),
-        "temporal_roughness_denoised": denoise.temporal_roughness(delivered),
+        "largest_frame_sum_change": film_out.largest_frame_sum_change,
+        "temporal_roughness_raw": film_out.temporal_roughness_raw,
+        "temporal_roughness_denoised": film_out.temporal_roughness_denoised,
         "files": files,
     }

@@ -46,11 +46,22 @@ def denoise_frame(frame: np.ndarray, guides: Guides, quality: str = "high") -> n
     return (out * np.maximum(scale, 0.0)).astype(np.float32)
 
 
+@dataclass(frozen=True)
+class DenoisedFilm:
+    """A denoised stack (memory-mapped) with what one pass over it measured: the largest relative change of a lit
+    frame's sum, and the flicker (TemporalRoughness) of the raw and the denoised frames."""
+
+    frames: np.ndarray
+    largest_frame_sum_change: float
+    temporal_roughness_raw: float
+    temporal_roughness_denoised: float
+
+
 def denoise_film(
     frames: np.ndarray, guides: Guides, path: Path, quality: str = "high", progress: bool = True
-) -> np.ndarray:
+) -> DenoisedFilm:
     """Denoise a (T, H, W, 3) stack (in memory or memory-mapped) frame by frame into ``path`` (.npy), written to a
-    temporary file and renamed when complete; returns the result memory-mapped."""
+    temporary file and renamed when complete, measuring the frames as they pass."""
     from tqdm import tqdm
 
     path = Path(path)
@@ -59,13 +70,20 @@ def denoise_film(
             f"frames are {frames.shape[2]}x{frames.shape[1]} pixels but the scene's camera is "
             f"{guides.albedo.shape[1]}x{guides.albedo.shape[0]}; run the scene and render stages again"
         )
+    raw_flicker, denoised_flicker, largest_change = TemporalRoughness(), TemporalRoughness(), 0.0
     with atomic_path(path) as temporary:
         out = np.lib.format.open_memmap(temporary, mode="w+", dtype=np.float32, shape=frames.shape)
         for k in tqdm(range(frames.shape[0]), desc="denoise", unit="frame", disable=not progress, leave=False):
-            out[k] = denoise_frame(np.asarray(frames[k], np.float32), guides, quality)
+            frame = np.asarray(frames[k], np.float32)
+            out[k] = denoised = denoise_frame(frame, guides, quality)
+            raw_sum = float(np.sum(frame, dtype=np.float64))
+            if raw_sum > 0:
+                largest_change = max(largest_change, abs(float(np.sum(denoised, dtype=np.float64)) / raw_sum - 1.0))
+            raw_flicker.add(frame)
+            denoised_flicker.add(denoised)
         out.flush()
         del out
-    return np.load(path, mmap_mode="r")
+    return DenoisedFilm(np.load(path, mmap_mode="r"), largest_change, raw_flicker.value, denoised_flicker.value)
 
 
 def save_guides(guides: Guides, path: Path) -> Path:
@@ -83,16 +101,22 @@ def save_guides(guides: Guides, path: Path) -> Path:
     return Path(path)
 
 
-def temporal_roughness(frames: np.ndarray) -> float:
-    """Frame-to-frame flicker of a stack [-]: the summed |second difference in time| of every pixel over the summed
-    signal, sum |f[k+1] - 2 f[k] + f[k-1]| / sum |f|. Noise that changes from frame to frame raises it; a
-    smooth wavefront moving through the frames keeps it low."""
-    rough, total = 0.0, 0.0
-    recent: list[np.ndarray] = []  # the two frames before this one
-    for k in range(frames.shape[0]):
-        frame = np.asarray(frames[k], np.float64)
-        total += float(np.abs(frame).sum())
-        if len(recent) == 2:
-            rough += float(np.abs(frame - 2.0 * recent[1] + recent[0]).sum())
-        recent = [*recent[-1:], frame]
-    return rough / total if total > 0 else 0.0
+class TemporalRoughness:
+    """Frame-to-frame flicker of a stack fed one frame at a time [-]: the summed |second difference in time| of
+    every pixel over the summed signal, sum |f[k+1] - 2 f[k] + f[k-1]| / sum |f|. Noise that changes from frame
+    to frame raises it; a smooth wavefront moving through the frames keeps it low."""
+
+    def __init__(self) -> None:
+        self.rough, self.total = 0.0, 0.0
+        self.recent: list[np.ndarray] = []  # the two frames before the next one
+
+    def add(self, frame: np.ndarray) -> None:
+        frame = np.asarray(frame, np.float64)
+        self.total += float(np.abs(frame).sum())
+        if len(self.recent) == 2:
+            self.rough += float(np.abs(frame - 2.0 * self.recent[1] + self.recent[0]).sum())
+        self.recent = [*self.recent[-1:], frame]
+
+    @property
+    def value(self) -> float:
+        return self.rough / self.total if self.total > 0 else 0.0

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from render.output.denoise import Guides
-from render.scene.model import Shape
+from render.scene.model import Scene, Shape, camera_ray_direction
 
 # Stratified camera rays per pixel side (4 x 4 = 16 rays): edges come out anti-aliased the way the rendered
 # frames' are, which the denoiser expects of its guides.
@@ -38,7 +38,6 @@ def guide_buffers(scene_dir: str | Path, samples: int = GUIDE_SAMPLES) -> Guides
     its meshes and ``optics.json``), averaged over ``samples`` x ``samples`` stratified rays per pixel."""
     from render.ptpb.raytrace import RayEngine
     from render.ptpb.stage import load_core_scene
-    from render.scene.model import Scene, camera_ray_direction
 
     scene_dir = Path(scene_dir)
     scene = Scene.load(scene_dir / "scene.json")

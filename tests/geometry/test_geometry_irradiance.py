@@ -91,5 +91,5 @@ def test_bright_closed_field_returns_light_to_the_sky():
     horizons = irradiance.compute_horizons(h, spacing, 24, rotation=0.2)
     sun = np.array([0.2, 0.3, np.sqrt(1 - 0.13)])
     budget = irradiance.radiation_budget(h, spacing, sun, 1000.0, 0.0, 1.0, horizons, bounces=8)
-    albedo, _ = irradiance.field_albedo(h, spacing, budget, horizons, 1000.0 * sun[2])
+    albedo, _ = irradiance.field_albedo(budget, horizons, 1000.0 * sun[2])
     assert albedo == pytest.approx(1.0, abs=0.05)
