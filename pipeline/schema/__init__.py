@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import Field, SerializationInfo, SerializerFunctionWrapHandler, field_validator, model_serializer
+from pydantic import (
+    Field,
+    SerializationInfo,
+    SerializerFunctionWrapHandler,
+    field_validator,
+    model_serializer,
+    model_validator,
+)
 
 from pipeline.schema.base import StrictModel
 from pipeline.schema.composite import CompositeConfig
@@ -90,6 +97,17 @@ class Config(StrictModel):
                     "stage reads (so that ours and the reference use the same value)"
                 )
         return render
+
+    @model_validator(mode="after")
+    def _reference_film_divides(self) -> Config:
+        k, camera = self.reference.downsample, self.scene.camera
+        if k > 1 and (camera.width % k or camera.height % k):
+            raise ValueError(
+                f"reference.downsample = {k} must divide scene.camera.width ({camera.width}) and "
+                f"scene.camera.height ({camera.height}): the references' pixels are {k} x {k} blocks of ours. "
+                "Pick a film size that is a multiple of it, or a downsample that divides both"
+            )
+        return self
 
 
 __all__ = ["Config", "StrictModel"]

@@ -385,6 +385,15 @@ class ReferenceConfig(StrictModel):
         "so a camera path enters dense snow below its face and reads bright: +1.3 % on the default sweep's "
         "firn point untiled, +0.4 % in 4 tiles (render/core/DESIGN.md §12) [-].",
     )
+    downsample: int = Field(
+        1,
+        ge=1,
+        le=64,
+        description="Render the references on a film this many times coarser in each axis (the same camera and "
+        "field of view; scene.camera.width and height must be multiples of it). Path tracing costs per pixel, so "
+        "2 makes the references 4x cheaper at the same spp. The compare and composite stages then read our frames "
+        "box-averaged over k x k pixels, which is what the same camera records on the coarser film [-].",
+    )
     variant: Literal["llvm_ad_rgb", "scalar_rgb"] = Field(
         "llvm_ad_rgb",
         description="Preferred Mitsuba variant; falls back to scalar_rgb with a warning (steady only) [-].",

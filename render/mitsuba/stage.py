@@ -30,10 +30,22 @@ class _PassOptions(TypedDict):
 
 def reference_scene(scene_dir: Path, cfg: ReferenceConfig) -> Scene:
     """The scene folder's scene as the references render it: with ``cfg.rr_depth``, when set, as their own
-    roulette start (it changes their noise, not what they estimate; render/core/DESIGN.md §12)."""
+    roulette start (it changes their noise, not what they estimate; render/core/DESIGN.md §12), and on a film
+    ``cfg.downsample`` times coarser in each axis."""
     scene = Scene.load(Path(scene_dir) / "scene.json")
     if cfg.rr_depth is not None:
         scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
+    if cfg.downsample > 1:
+        camera, k = scene.camera, cfg.downsample
+        if camera.width % k or camera.height % k:
+            raise ValueError(
+                f"reference.downsample {k} does not divide the film's {camera.width} x {camera.height} pixels: "
+                "set scene.camera.width and height to multiples of it, or reference.downsample to a common divisor"
+            )
+        # The same camera on a film k times coarser: its pixels are k x k blocks of ours (compare box-averages).
+        scene = dataclasses.replace(
+            scene, camera=dataclasses.replace(camera, width=camera.width // k, height=camera.height // k)
+        )
     return scene
 
 
@@ -72,6 +84,7 @@ def run_reference_stage(
             "width": scene.camera.width,
             "height": scene.camera.height,
             "frame_mode": "bins",
+            "downsample": cfg.downsample,
         },
     }
     if cfg.steady:

@@ -15,7 +15,7 @@ from pipeline.atomic import write_text_atomic
 from render.output.agreement import agreement
 from render.output.figures import error_curves
 from render.output.files import RenderOutputs
-from render.output.metrics import RELMSE_EPSILON, relmse
+from render.output.metrics import RELMSE_EPSILON, box_downsample, downsample_factor, relmse
 
 log = logging.getLogger(__name__)
 
@@ -37,14 +37,19 @@ COLUMNS = [
 def measure(image: np.ndarray, reference: np.ndarray | None = None, to_bins=None) -> dict[str, Any]:
     """Per-channel means of an image or (T, H, W, 3) stack and, against a reference of its shape, relMSE, RMSE
     and the agreement, a window of frames at a time (``to_bins``: the image's FrameAxis, converting gate
-    frames window by window); the stacks may be memory-mapped films."""
+    frames window by window); the stacks may be memory-mapped films. A reference rendered k times coarser in
+    both axes (``reference.downsample``) is measured against the image box-averaged over k x k pixels, which is
+    what the same camera records on the coarser film; ``downsample`` in the result says by how much."""
     from itertools import repeat
 
     from render.output.files import frame_windows
 
     stack = image if image.ndim == 4 else image[None]
     references: Any = repeat(None)
-    if reference is not None and reference.shape == image.shape:
+    factor = downsample_factor(image.shape, reference.shape) if reference is not None else None
+    if reference is not None and factor is None:
+        log.warning("compare: reference shape %s does not match %s by an integer factor", reference.shape, image.shape)
+    if reference is not None and factor is not None:
         references = frame_windows(reference if reference.ndim == 4 else reference[None])
     sums, count = np.zeros(3), 0
     squared = relative = 0.0
@@ -56,6 +61,7 @@ def measure(image: np.ndarray, reference: np.ndarray | None = None, to_bins=None
         sums += x.reshape(-1, 3).sum(axis=0)
         count += x.size // 3
         if pair is not None:
+            x = box_downsample(x, factor or 1)
             r = np.asarray(pair[1], np.float64)
             if not np.isfinite(r).all():
                 raise ValueError("render or reference contains NaN or infinite values")
@@ -66,7 +72,8 @@ def measure(image: np.ndarray, reference: np.ndarray | None = None, to_bins=None
             reference_sum = r.sum(axis=0) if reference_sum is None else reference_sum + r.sum(axis=0)
     measured: dict[str, Any] = {"means": [float(v) for v in sums / max(1, count)]}
     if image_sum is not None and reference_sum is not None:
-        values = count * 3
+        values = count * 3 // (factor or 1) ** 2
+        measured["downsample"] = factor
         measured.update(relmse=relative / values, rmse=float(np.sqrt(squared / values)))
         measured["agreement"] = agreement(image_sum, reference_sum)  # its tiles sum the frames first
     return measured
@@ -88,6 +95,7 @@ def _row(renderer, quantity, seconds, count, image, reference, memory, to_bins=N
         "rmse": measured.get("rmse"),
         "agreement": None,
         "disagrees": False,
+        "downsample": measured.get("downsample"),
     }
     if "agreement" in measured:
         verdict = measured["agreement"]
@@ -162,10 +170,16 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: 
     snapshots = ours_dir / "snapshots.npz" if ours_dir else None
     if steady_ref is not None and snapshots is not None and snapshots.exists():
         with np.load(snapshots) as z:
-            series["ours (PTPB), steady"] = [
-                {"seconds": float(t), "iterations": int(i), "relmse": relmse(image, steady_ref)}
-                for i, t, image in zip(z["iterations"], z["seconds"], z["steady"])
-            ]
+            factor = downsample_factor(z["steady"].shape[1:], steady_ref.shape)
+            if factor is not None:
+                series["ours (PTPB), steady"] = [
+                    {
+                        "seconds": float(t),
+                        "iterations": int(i),
+                        "relmse": relmse(box_downsample(image, factor), steady_ref),
+                    }
+                    for i, t, image in zip(z["iterations"], z["seconds"], z["steady"])
+                ]
     if series:
         error_curves(series, out_dir / "error_vs_time.png")
     return {"rows": rows, "error_curves": {k: v for k, v in series.items()}}
@@ -213,6 +227,12 @@ def key_results(rows: list[dict[str, Any]]) -> list[str]:
         lines.append(
             f"Our frames carry {_ratio_text(ours, ref)} (R / G / B) of mitransient's energy, compared as bins; "
             f"relMSE {_fmt(ours['relmse'])}."
+        )
+    factor = next((r["downsample"] for r in rows if r.get("downsample", 1) not in (None, 1)), None)
+    if factor:
+        lines.append(
+            f"The references ran on a film {factor}× coarser in each axis (reference.downsample); every comparison "
+            f"reads our frames box-averaged over {factor} × {factor} pixels, what the same camera records there."
         )
     for row in rows:
         if row["quantity"] == "steady" or row["renderer"] == "mitransient":

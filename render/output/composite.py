@@ -28,6 +28,7 @@ from pipeline.memory import PeakMemory
 from render.output.denoise import Guides
 from render.output.figures import ArrivalTimes, relative_difference, side_by_side_still, streak_image
 from render.output.files import FrameAxis, RenderOutputs, frame_windows
+from render.output.metrics import box_downsample, downsample_factor
 from render.output.tonemap import LuminanceHistogram, display_values, exposure_scale, luminance, to_display
 from render.output.video import Mp4Writer, annotate, format_time, upscale
 
@@ -498,6 +499,15 @@ def run_composite_stage(
     return {**summary, **memory.record()}
 
 
+def _downsampled(frames: np.ndarray, factor: int) -> np.ndarray:
+    """A film box-averaged over factor x factor pixels, a window of frames at a time (files.frame_windows)."""
+    t, h, w, c = frames.shape
+    out = np.empty((t, h // factor, w // factor, c), np.float32)
+    for first, window in frame_windows(frames):
+        out[first : first + len(window)] = box_downsample(window, factor)
+    return out
+
+
 def _composite(
     render_dir: Path, reference_dir: Path | None, scene_dir: Path, cfg, out_dir: Path, guides: Guides | None
 ) -> dict:
@@ -539,18 +549,31 @@ def _composite(
     if denoised is not None:
         written.update(denoised.pop("files"))
     reference_frames = RenderOutputs.read(reference_dir).frames(memory_mapped=True) if reference_dir else None
-    if reference_frames is not None and reference_frames.shape == frames.shape:
+    factor = downsample_factor(frames.shape, reference_frames.shape) if reference_frames is not None else None
+    if reference_frames is not None and factor is not None:
         # mitransient's frames are bin integrals; gate frames are densities per metre (render/core/DESIGN.md §2).
+        # A reference on a film k times coarser (reference.downsample) faces ours box-averaged over k x k pixels.
         bins_film = film.in_bins()
+        ours_shown = frames if factor == 1 else _downsampled(frames, factor)
+        label = "ours (PTPB)" if factor == 1 else f"ours (PTPB), {factor}×{factor} box"
         written.update(
-            side_by_side(frames, reference_frames, ("ours (PTPB)", "mitransient"), bins_film, cfg, out_dir, a_film=film)
+            side_by_side(ours_shown, reference_frames, (label, "mitransient"), bins_film, cfg, out_dir, a_film=film)
         )
         reference_videos = transient_videos(
-            reference_frames, bins_film, cfg, out_dir, stem="reference_transient", metres_per_pixel=metres_per_pixel
+            reference_frames,
+            bins_film,
+            cfg,
+            out_dir,
+            stem="reference_transient",
+            metres_per_pixel=metres_per_pixel * factor,
         )
         written.update({f"reference_{k}": v for k, v in reference_videos.items()})
     elif reference_frames is not None:
-        log.warning("reference frames %s do not match ours %s; no side-by-side", reference_frames.shape, frames.shape)
+        log.warning(
+            "reference frames %s do not match ours %s by an integer factor; no side-by-side",
+            reference_frames.shape,
+            frames.shape,
+        )
     return {
         "files": sorted(p.name for p in written.values()),
         "frames": int(frames.shape[0]),

@@ -52,3 +52,11 @@ def test_the_video_title_comes_from_the_config():
     assert run_title(load_config(DEMO)) == "Penitentes at 30.1°S, 23 Jan, sun at 10:00 solar time: light in flight"
     northern = load_config(DEMO, ["geometry.latitude=28.0", "scene.sun.solar_time_h=15.5", "geometry.days=1"])
     assert run_title(northern) == "Penitentes at 28.0°N, 25 Nov, sun at 15:30 solar time: light in flight"
+
+
+def test_a_reference_film_that_does_not_tile_ours_is_refused():
+    with pytest.raises(ConfigError) as refused:
+        load_config(DEMO, ["reference.downsample=3"])  # the demo's 320 x 240 is no multiple of 3
+    text = str(refused.value)
+    assert "reference.downsample = 3 must divide scene.camera.width (320)" in text
+    assert load_config(DEMO, ["reference.downsample=4"]).reference.downsample == 4
