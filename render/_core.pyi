@@ -20,6 +20,11 @@ class RayScene:
     def add_mesh(self, vertices: npt.ArrayLike, faces: npt.ArrayLike, mesh_id: int) -> None:
         """vertices (N, 3) float32, faces (M, 3) uint32."""
 
+    def add_instanced_mesh(
+        self, vertices: npt.ArrayLike, faces: npt.ArrayLike, offsets: npt.ArrayLike, mesh_id: int
+    ) -> None:
+        """The mesh placed at each of the (K, 3) float64 offsets, as instances of one copy."""
+
     def commit(self) -> None: ...
     @property
     def committed(self) -> bool: ...
@@ -27,6 +32,8 @@ class RayScene:
     def mesh_count(self) -> int: ...
     @property
     def triangle_count(self) -> int: ...
+    @property
+    def placed_triangle_count(self) -> int: ...
     @property
     def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """(lower, upper) corners of the committed scene's box."""

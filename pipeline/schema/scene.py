@@ -251,6 +251,16 @@ class ObjectConfig(StrictModel):
         description="ply: mesh file, PLY (ASCII or binary), OBJ or STL; absolute, or relative to the config "
         "file's folder [path].",
     )
+    tiles: int = Field(
+        1,
+        ge=1,
+        le=401,
+        description="penitentes: place the grown field's periodic surface tiles x tiles times around the grown "
+        "tile, a landscape instead of a box: the copies are instances of one mesh (memory of one tile) closed by "
+        "walls and a base around the outside, and the walls stand (tiles - 1) / 2 tiles away, so a low camera "
+        "sees the field run to its horizon (render/core/DESIGN.md §13). Odd, so the grown tile is in the "
+        "middle; 1 = the geometry stage's closed mesh as it is [-].",
+    )
 
     @model_validator(mode="after")
     def _medium_or_surface(self) -> ObjectConfig:
@@ -260,6 +270,13 @@ class ObjectConfig(StrictModel):
             raise ValueError(f"object '{self.name}' has shape ply but no path")
         if self.reflectance is not None and max(self.reflectance) > 1:
             raise ValueError(f"object '{self.name}': reflectance must not exceed 1")
+        if self.tiles > 1 and self.shape != "penitentes":
+            raise ValueError(f"object '{self.name}': tiles applies to shape penitentes only (the periodic field)")
+        if self.tiles % 2 == 0:
+            raise ValueError(
+                f"object '{self.name}': tiles must be odd ({self.tiles - 1} or {self.tiles + 1}), so that the "
+                "grown tile stays in the middle"
+            )
         return self
 
 
@@ -341,6 +358,13 @@ class SceneConfig(StrictModel):
             raise ValueError("max_depth must be -1 (unbounded) or >= 2 (2 = direct light / single scattering)")
         if sum(o.shape == "penitentes" for o in self.objects) > 1:
             raise ValueError("at most one object may have shape penitentes")
+        tiled = [o.name for o in self.objects if o.tiles > 1]
+        ring = [o.name for o in self.objects if o.shape == "snowpack"]
+        if tiled and ring:
+            raise ValueError(
+                f"objects {', '.join(ring)} (snowpack) would overlap the tiled field '{tiled[0]}': the copies "
+                "already surround the grown tile; drop the snowpack object or set tiles: 1"
+            )
         return self
 
 

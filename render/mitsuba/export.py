@@ -105,7 +105,11 @@ def use_variant(preferred: str = "llvm_ad_rgb", *, transient: bool) -> str:
 def _bounding_sphere(scene: Scene, scene_dir: Path) -> tuple[np.ndarray, float]:
     if scene.bounding_sphere is not None:
         return np.asarray(scene.bounding_sphere["center"], np.float64), float(scene.bounding_sphere["radius"])
-    points = [read_mesh(scene.mesh_path(s, scene_dir))[0] for s in scene.shapes]
+    points = [
+        (v[None] + np.asarray(s.offsets or [[0.0, 0.0, 0.0]])[:, None]).reshape(-1, 3)
+        for s in scene.shapes
+        for v in [read_mesh(scene.mesh_path(s, scene_dir))[0]]
+    ]
     if not points:
         return np.zeros(3), 1.0
     return bounding_sphere_of_points(np.concatenate(points))
@@ -180,7 +184,7 @@ def plan_tiles(scene: Scene, scene_dir: Path, tiles: int) -> list[Tile]:
     engine = RayEngine()
     for i, shape in enumerate(scene.shapes):
         vertices, faces = read_mesh(scene.mesh_path(shape, scene_dir))
-        engine.add_mesh(np.asarray(vertices, np.float32), np.asarray(faces, np.uint32), i)
+        engine.add_mesh(np.asarray(vertices, np.float32), np.asarray(faces, np.uint32), i, shape.offsets)
     engine.commit()
     px, py = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
     directions = camera_ray_direction(cam, px.ravel(), py.ravel()).reshape(-1, 3)
@@ -326,7 +330,20 @@ def scene_to_mitsuba(
             d["interior"] = ref(shape.interior)
         if shape.emission is not None and max(shape.emission) > 0:
             d["emitter"] = {"type": "area", "radiance": _rgb(shape.emission)}
-        out[f"shape_{i}_{shape.name}"] = d
+        if not shape.offsets:
+            out[f"shape_{i}_{shape.name}"] = d
+            continue
+        # Copies of one mesh: a shapegroup placed by instances, so Mitsuba holds the mesh once too (media inside
+        # instanced shapes render as inside the same shape placed by hand; render/core/DESIGN.md §13).
+        group = {k: v for k, v in d.items() if k != "to_world"}
+        out[f"group_{i}_{shape.name}"] = {"type": "shapegroup", "shape": group}
+        for k, offset in enumerate(shape.offsets):
+            move = T().translate([float(c) for c in offset])
+            out[f"shape_{i}_{shape.name}_{k}"] = {
+                "type": "instance",
+                "shapegroup": {"type": "ref", "id": f"group_{i}_{shape.name}"},
+                "to_world": frame @ move,
+            }
 
     for i, light in enumerate(scene.lights):
         kind, key = light["type"], f"light_{i}_{light['type']}"

@@ -51,12 +51,26 @@ class RayEngine:
     def __init__(self) -> None:
         self._scene = _core.RayScene()
 
-    def add_mesh(self, vertices: np.ndarray, faces: np.ndarray, mesh_id: int) -> None:
+    def add_mesh(self, vertices: np.ndarray, faces: np.ndarray, mesh_id: int, offsets=None) -> None:
+        """A mesh; with ``offsets``, the (K, 3) translations [m] of its instanced copies (add_instanced_mesh)."""
+        if offsets is not None:
+            self.add_instanced_mesh(vertices, faces, offsets, mesh_id)
+            return
         v = np.ascontiguousarray(vertices, dtype=np.float32)
         f = np.asarray(faces)
         if f.size and (f.min() < 0):
             raise ValueError(f"mesh {mesh_id}: faces contain negative vertex indices")
         self._scene.add_mesh(v, np.ascontiguousarray(f, dtype=np.uint32), int(mesh_id))
+
+    def add_instanced_mesh(self, vertices: np.ndarray, faces: np.ndarray, offsets, mesh_id: int) -> None:
+        """The mesh placed at each of the (K, 3) translations ``offsets`` [m], traced as Embree instances of
+        one copy (render/core/DESIGN.md §13); every copy answers with ``mesh_id``."""
+        v = np.ascontiguousarray(vertices, dtype=np.float32)
+        f = np.asarray(faces)
+        if f.size and (f.min() < 0):
+            raise ValueError(f"mesh {mesh_id}: faces contain negative vertex indices")
+        t = np.ascontiguousarray(offsets, dtype=np.float64).reshape(-1, 3)
+        self._scene.add_instanced_mesh(v, np.ascontiguousarray(f, dtype=np.uint32), t, int(mesh_id))
 
     def commit(self) -> RayEngine:
         self._scene.commit()
@@ -64,7 +78,13 @@ class RayEngine:
 
     @property
     def triangle_count(self) -> int:
+        """Triangles stored: an instanced mesh counts once."""
         return int(self._scene.triangle_count)
+
+    @property
+    def placed_triangle_count(self) -> int:
+        """Triangles in the scene: an instanced mesh counts once per copy."""
+        return int(self._scene.placed_triangle_count)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

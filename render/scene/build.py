@@ -3,7 +3,9 @@ neutral scene description (``scene.json``), the PTPB core's dict (``ptpb_scene.j
 meshes (``meshes/*.ply``) and the media's derived optical quantities (``optics.json``).
 
 Placement rules:
-- ``penitentes`` is the geometry stage's watertight PLY as it is (metres, mean surface at z = 0).
+- ``penitentes`` is the geometry stage's watertight PLY as it is (metres, mean surface at z = 0); with
+  ``tiles`` > 1 it is instead the grown field's periodic surface placed tiles x tiles times around the grown
+  tile as instances of one copy, closed by walls and a base around the outside (render/core/DESIGN.md §13).
 - ``snowpack`` next to a penitente mesh is a closed ring of snow around its footprint, ``gap``
   away from it, ``margin`` wide, with its top at ``top_z`` (default 0, the field's mean surface);
   alone it is a slab under the origin.
@@ -45,6 +47,8 @@ from render.scene.model import (
 log = logging.getLogger(__name__)
 
 PENITENTE_MESH = "penitentes.ply"
+HEIGHTFIELD = "heightfield.npz"
+Mesh = tuple[np.ndarray, np.ndarray]
 
 
 # ---------------------------------------------------------------- media
@@ -159,6 +163,34 @@ def _object_mesh(obj: ObjectConfig, penitentes: tuple[np.ndarray, np.ndarray] | 
     except (ValueError, KeyError, IndexError) as exc:  # a truncated or foreign PLY
         reason = str(exc).removeprefix(f"{path}: ")
         raise ValueError(f"{where}: cannot read mesh file {path}: {reason}") from None
+
+
+def _tiled_field(obj: ObjectConfig, geometry_dir: Path, z_base: float) -> tuple[Mesh, np.ndarray, Mesh]:
+    """The grown field as a landscape (render/core/DESIGN.md §13): its periodic surface at full resolution,
+    the (tiles^2, 3) offsets of its copies centred on the grown tile, and the walls and base that close them
+    into one solid at the base of the geometry stage's mesh. The copies and walls are checked to close on 3 x 3
+    (the same construction at any count)."""
+    from geometry import mesh as field_mesh
+
+    path = Path(geometry_dir) / HEIGHTFIELD
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{path}: scene.objects '{obj.name}' has tiles {obj.tiles}, which needs the geometry stage's height "
+            "field; run the geometry stage first"
+        )
+    with np.load(path) as z:
+        h, spacing = np.asarray(z["height"], float), float(z["spacing"])
+    sheet = field_mesh.periodic_surface(h, spacing)
+    closure = field_mesh.tiled_closure(h, spacing, z_base, obj.tiles)
+    tile = h.shape[0] * spacing
+    trial = field_mesh.tiled_closure(h, spacing, z_base, 3)
+    pieces = [sheet.vertices + o for o in field_mesh.tile_offsets(tile, 3)] + [trial.vertices]
+    counts = np.cumsum([0] + [len(v) for v in pieces])
+    faces = np.concatenate([sheet.faces + counts[k] for k in range(9)] + [trial.faces + counts[9]])
+    welded, inverse = np.unique(np.round(np.concatenate(pieces), 7), axis=0, return_inverse=True)
+    _check_mesh(f"{obj.name} (3 x 3 tiles)", welded, inverse.reshape(-1)[faces])
+    as_mesh = lambda m: (m.vertices.astype(np.float32), m.faces.astype(np.uint32))  # noqa: E731
+    return as_mesh(sheet), field_mesh.tile_offsets(tile, obj.tiles), as_mesh(closure)
 
 
 def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> None:
@@ -299,17 +331,19 @@ def direct_arrivals(
     meshes: list[tuple[np.ndarray, np.ndarray]],
     emitter_centres: list[np.ndarray],
     max_rays: int = 16384,
+    offsets: list[np.ndarray | None] | None = None,
 ) -> np.ndarray:
     """OPL of single-scattered light at the surfaces the camera sees, light -> surface point -> pinhole,
     on a grid over the film (its edges included: jittered rays reach the pixel corners).
 
     Returns (lights with a time origin, rows, columns), NaN where the camera sees no surface; the sun,
-    point and spot lights come first in scene order, then the emitting shapes."""
+    point and spot lights come first in scene order, then the emitting shapes. ``offsets[i]``, when given,
+    places mesh i at each of its translations (instanced copies)."""
     from render.ptpb.raytrace import RayEngine
 
     engine = RayEngine()
     for i, (v, f) in enumerate(meshes):
-        engine.add_mesh(np.asarray(v, np.float32), np.asarray(f, np.uint32), i)
+        engine.add_mesh(np.asarray(v, np.float32), np.asarray(f, np.uint32), i, offsets[i] if offsets else None)
     engine.commit()
     step = max(1.0, math.sqrt(camera.width * camera.height / max_rays))
     px, py = np.meshgrid(
@@ -377,17 +411,31 @@ def build_scene(
         penitentes = read_mesh(path)
     media = {key: medium_optics(m, key) for key, m in cfg.media.items()}
     meshes: list[tuple[str, tuple[np.ndarray, np.ndarray]]] = []
+    offsets: list[np.ndarray | None] = []
     scene_shapes: list[Shape] = []
+    extents: list[np.ndarray] = []  # points whose box bounds the scene, copies included
     for obj in cfg.objects:
         vertices, faces = _object_mesh(obj, penitentes)
         _check_mesh(obj.name, vertices, faces)
-        meshes.append((obj.name, (vertices, faces)))
-        if obj.medium is not None:
-            kind = media[obj.medium].boundary
-            scene_shapes.append(Shape(obj.name, f"meshes/{obj.name}.ply", kind, interior=obj.medium))
-        else:
-            scene_shapes.append(Shape(obj.name, f"meshes/{obj.name}.ply", "diffuse", albedo=obj.reflectance))
-    all_points = np.concatenate([m[1][0] for m in meshes])
+        pieces: list[tuple[str, Mesh, np.ndarray | None]] = [(obj.name, (vertices, faces), None)]
+        if obj.tiles > 1:
+            # The grown tile's surface placed tiles x tiles times as instances, closed by one set of walls.
+            sheet, copies, closure = _tiled_field(obj, Path(geometry_dir or ""), float(np.min(vertices[:, 2])))
+            pieces = [(obj.name, sheet, copies), (f"{obj.name}_walls", closure, None)]
+            extents.append(sheet[0])
+        for name, piece, where in pieces:
+            meshes.append((name, piece))
+            offsets.append(where)
+            placed = None if where is None else where.tolist()
+            extents.append(piece[0])
+            if obj.medium is not None:
+                kind = media[obj.medium].boundary
+                scene_shapes.append(Shape(name, f"meshes/{name}.ply", kind, interior=obj.medium, offsets=placed))
+            else:
+                scene_shapes.append(
+                    Shape(name, f"meshes/{name}.ply", "diffuse", albedo=obj.reflectance, offsets=placed)
+                )
+    all_points = np.concatenate(extents)
     centre, radius = bounding_sphere_of_points(all_points)
     if cfg.camera.placement == "look_at":
         camera = Camera(
@@ -418,7 +466,11 @@ def build_scene(
                     for v in sun_tau_origin(np.asarray(light["to_sun"]), centre, radius, light["reference_point"])
                 ]
     arrivals = direct_arrivals(
-        camera, lights, [m[1] for m in meshes], [np.asarray(m[1][0], np.float64).mean(0) for m in light_meshes]
+        camera,
+        lights,
+        [m[1] for m in meshes],
+        [np.asarray(m[1][0], np.float64).mean(0) for m in light_meshes],
+        offsets=offsets,
     )
     film = fit_window(cfg.film, arrivals)
     if arrivals.shape[0] and np.any(np.isfinite(arrivals)):

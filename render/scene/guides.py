@@ -47,7 +47,7 @@ def guide_buffers(scene_dir: str | Path, samples: int = GUIDE_SAMPLES) -> Guides
     engine = RayEngine()
     albedos = []
     for index, (shape, core_shape) in enumerate(zip(scene.shapes, core["shapes"], strict=True)):
-        engine.add_mesh(core_shape["vertices"], core_shape["faces"], index)
+        engine.add_mesh(core_shape["vertices"], core_shape["faces"], index, core_shape.get("offsets"))
         albedos.append(_shape_albedo(shape, optics))
     engine.commit()
     camera = scene.camera

@@ -15,7 +15,9 @@ renderer. Schema (``version`` 1)::
                boundary null|dielectric, form, name, source}}
     shapes:   [{name, mesh (PLY path), kind null|dielectric|diffuse, interior (medium id or null),
                albedo[3] (diffuse), emission[3] (one-sided radiance along the outward normal, W m-2 sr-1,
-               or null)}]. Closed meshes, counter-clockwise seen from outside; all sit in air (n = 1).
+               or null), offsets (K x 3 translations in m: the mesh stands at each, as instances; or null)}].
+               Closed meshes, counter-clockwise seen from outside (instanced copies close with the other
+               shapes of their medium); all sit in air (n = 1).
     lights:   [{type: sun, model directional|disk, to_sun[3], irradiance[3] W m-2 (on a plane facing
                the sun), angular_diameter_deg, tau_origin_point[3] (tau = 0 plane through it, normal
                to_sun), reference_point (config pin or null)},
@@ -97,6 +99,9 @@ class Shape:
     interior: str | None = None
     albedo: Vec3 | None = None
     emission: Vec3 | None = None
+    # Translations [m] at which the mesh stands, each a copy traced as an instance of one (render/core/DESIGN.md
+    # §13); None: once, where its vertices are.
+    offsets: list[list[float]] | None = None
 
 
 @dataclass
@@ -287,6 +292,7 @@ def to_ptpb_core(scene: Scene) -> tuple[dict[str, Any], list[str], list[str]]:
                 "exterior": -1,
                 "albedo": list(s.albedo) if s.albedo is not None else [0.0, 0.0, 0.0],
                 "radiance": list(s.emission) if s.emission is not None else [0.0, 0.0, 0.0],
+                **({"offsets": [list(map(float, o)) for o in s.offsets]} if s.offsets else {}),
             }
         )
     core: dict[str, Any] = {

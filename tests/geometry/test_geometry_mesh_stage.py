@@ -119,3 +119,26 @@ def test_demo_geometry_mesh_is_watertight(tmp_path):
     cfg = GeometryConfig()
     run_geometry_stage(cfg, tmp_path, seed=1, quiet=True)
     assert mesh.manifold_volume(mesh.read_ply(tmp_path / "penitentes.ply")) > 0
+
+
+@pytest.mark.parametrize("tiles", [1, 3, 5])
+def test_tiled_copies_and_walls_close_the_same_solid_as_the_tiled_mesh(tiles):
+    """The landscape's pieces (render/core/DESIGN.md §13): tiles^2 copies of the open periodic surface and one
+    set of walls and base enclose what heightfield_solid encloses for the same tiling, and no triangle of the
+    walls or base spans more than a tile (long slivers slow every ray that passes them)."""
+    rng = np.random.default_rng(4)
+    h, spacing, thickness = rng.normal(0.0, 0.1, (12, 12)), 0.1, 0.5
+    tile = 12 * spacing
+    sheet = mesh.periodic_surface(h, spacing)
+    walls = mesh.tiled_closure(h, spacing, float((h - h.mean()).min()) - thickness, tiles)
+    pieces = [sheet.vertices + o for o in mesh.tile_offsets(tile, tiles)] + [walls.vertices]
+    counts = np.cumsum([0] + [len(v) for v in pieces])
+    faces = np.concatenate([sheet.faces + counts[k] for k in range(tiles * tiles)] + [walls.faces + counts[-2]])
+    welded, inverse = np.unique(np.round(np.concatenate(pieces), 9), axis=0, return_inverse=True)
+    volume = mesh.manifold_volume(mesh.TriangleMesh(welded, inverse.reshape(-1)[faces]))
+    assert volume == pytest.approx(mesh.manifold_volume(mesh.heightfield_solid(h, spacing, thickness, tiles)), rel=1e-6)
+    corners = walls.vertices[walls.faces]
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    assert edges.max() <= np.sqrt(2) * tile * (1 + 1e-9)  # a tile square's diagonal at most
+    with pytest.raises(ValueError, match="odd"):
+        mesh.tiled_closure(h, spacing, -1.0, 2)

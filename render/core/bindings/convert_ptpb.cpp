@@ -200,6 +200,10 @@ Scene parse_scene(const py::dict& d) {
     sh.exterior = get<int>(s, "exterior", kVacuum, w);
     sh.albedo = vec3(s, "albedo", {0, 0, 0}, w);
     sh.radiance = vec3(s, "radiance", {0, 0, 0}, w);
+    if (s.contains("offsets") && !s["offsets"].is_none()) {
+      const auto offsets = mesh_array<double>(s, "offsets", w);
+      sh.offsets.assign(offsets.data(), offsets.data() + offsets.size());
+    }
     sc.shapes.push_back(std::move(sh));
   }
   i = 0;

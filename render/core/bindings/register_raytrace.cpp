@@ -58,10 +58,23 @@ void register_raytrace(py::module_& m) {
                           static_cast<std::size_t>(faces.shape(0)), mesh_id);
           },
           py::arg("vertices"), py::arg("faces"), py::arg("mesh_id"))
+      .def(
+          "add_instanced_mesh",
+          [](ptpb::RayScene& self, const FloatArray& vertices, const IndexArray& faces,
+             const py::array_t<double, py::array::c_style | py::array::forcecast>& offsets, std::uint32_t mesh_id) {
+            require_n_by_3(vertices, "vertices");
+            require_n_by_3(faces, "faces");
+            require_n_by_3(offsets, "offsets");
+            self.add_instanced_mesh(vertices.data(), static_cast<std::size_t>(vertices.shape(0)), faces.data(),
+                                    static_cast<std::size_t>(faces.shape(0)), offsets.data(),
+                                    static_cast<std::size_t>(offsets.shape(0)), mesh_id);
+          },
+          py::arg("vertices"), py::arg("faces"), py::arg("offsets"), py::arg("mesh_id"))
       .def("commit", &ptpb::RayScene::commit, py::call_guard<py::gil_scoped_release>())
       .def_property_readonly("committed", &ptpb::RayScene::committed)
       .def_property_readonly("mesh_count", &ptpb::RayScene::mesh_count)
       .def_property_readonly("triangle_count", &ptpb::RayScene::triangle_count)
+      .def_property_readonly("placed_triangle_count", &ptpb::RayScene::placed_triangle_count)
       .def_property_readonly("bounds",
                              [](const ptpb::RayScene& self) {
                                const auto b = self.bounds();

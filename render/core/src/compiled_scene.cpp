@@ -62,12 +62,27 @@ CompiledScene::CompiledScene(const Scene& scene) : scene_(scene) {
       require(finite_nonneg(s.albedo) && max_component(s.albedo) <= 1.0, where + ".albedo must lie in [0, 1]");
       if (max_component(s.albedo) > 0) has_diffuse_reflectors_ = true;
     }
-    rays_.add_mesh(s.vertices.data(), s.vertices.size() / 3, s.faces.data(), s.faces.size() / 3,
-                   static_cast<std::uint32_t>(mesh_id));
+    Vec3d shape_lo{1e300, 1e300, 1e300}, shape_hi{-1e300, -1e300, -1e300};
     for (std::size_t k = 0; k < s.vertices.size(); k += 3) {
       for (int a = 0; a < 3; ++a) {
-        lo[a] = std::min(lo[a], double(s.vertices[k + a]));
-        hi[a] = std::max(hi[a], double(s.vertices[k + a]));
+        shape_lo[a] = std::min(shape_lo[a], double(s.vertices[k + a]));
+        shape_hi[a] = std::max(shape_hi[a], double(s.vertices[k + a]));
+      }
+    }
+    if (s.offsets.empty()) {
+      rays_.add_mesh(s.vertices.data(), s.vertices.size() / 3, s.faces.data(), s.faces.size() / 3,
+                     static_cast<std::uint32_t>(mesh_id));
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], shape_lo[a]), hi[a] = std::max(hi[a], shape_hi[a]);
+    } else {
+      require(s.offsets.size() % 3 == 0, where + ".offsets must be K x 3");
+      require(!s.is_emitter(), where + ": an instanced shape (offsets) cannot emit; give the emitter its own mesh");
+      rays_.add_instanced_mesh(s.vertices.data(), s.vertices.size() / 3, s.faces.data(), s.faces.size() / 3,
+                               s.offsets.data(), s.offsets.size() / 3, static_cast<std::uint32_t>(mesh_id));
+      for (std::size_t k = 0; k < s.offsets.size(); k += 3) {
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = std::min(lo[a], shape_lo[a] + s.offsets[k + a]);
+          hi[a] = std::max(hi[a], shape_hi[a] + s.offsets[k + a]);
+        }
       }
     }
     // Area emitters: triangle cdf for uniform position sampling.

@@ -7,6 +7,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "ptpb/parallel.hpp"
 
@@ -63,6 +64,8 @@ struct RayScene::Impl {
   // Own copies of the geometry, used for normals (and by later consumers of hits).
   std::vector<std::vector<float>> vertices;
   std::vector<std::vector<std::uint32_t>> faces;
+  std::vector<RTCScene> children;                           // one per instanced mesh, released with the scene
+  std::vector<std::pair<std::uint32_t, Vec3d>> placements;  // the point query's copy of placements_
 };
 
 RayScene::RayScene() : impl_(std::make_unique<Impl>()) {
@@ -75,11 +78,12 @@ RayScene::RayScene() : impl_(std::make_unique<Impl>()) {
 
 RayScene::~RayScene() {
   if (impl_->scene) rtcReleaseScene(impl_->scene);
+  for (RTCScene child : impl_->children) rtcReleaseScene(child);
   if (impl_->device) rtcReleaseDevice(impl_->device);
 }
 
-void RayScene::add_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
-                        std::size_t face_count, std::uint32_t mesh_id) {
+void RayScene::check_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
+                          std::size_t face_count, std::uint32_t mesh_id) const {
   if (committed_) throw std::logic_error("add_mesh called after commit()");
   if (vertex_count < 3 || face_count == 0) {
     throw std::invalid_argument("mesh " + std::to_string(mesh_id) +
@@ -99,7 +103,14 @@ void RayScene::add_mesh(const float* vertices, std::size_t vertex_count, const s
                                   std::to_string(vertex_count) + " vertices");
     }
   }
-  RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+}
+
+namespace {
+
+// A committed Embree triangle geometry holding copies of the caller's buffers (released by the caller).
+RTCGeometry triangle_geometry(RTCDevice device, const float* vertices, std::size_t vertex_count,
+                              const std::uint32_t* faces, std::size_t face_count, std::uint32_t mesh_id) {
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto* vbuf = static_cast<float*>(
       rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertex_count));
   auto* ibuf = static_cast<std::uint32_t*>(
@@ -110,25 +121,92 @@ void RayScene::add_mesh(const float* vertices, std::size_t vertex_count, const s
   }
   std::copy(vertices, vertices + 3 * vertex_count, vbuf);
   std::copy(faces, faces + 3 * face_count, ibuf);
-  for (std::size_t i = 0; i < vertex_count; ++i) {
-    Vec3f v(vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]);
-    for (int a = 0; a < 3; ++a) {
-      bounds_.lower[a] = std::min(bounds_.lower[a], v[a]);
-      bounds_.upper[a] = std::max(bounds_.upper[a], v[a]);
-    }
-  }
   rtcCommitGeometry(geom);
-  const unsigned geom_id = rtcAttachGeometry(impl_->scene, geom);
-  rtcReleaseGeometry(geom);
-  throw_device_error(impl_->device, "add_mesh");
-  if (geom_id != mesh_ids_.size()) throw std::logic_error("unexpected Embree geometry id");
+  return geom;
+}
+
+}  // namespace
+
+void RayScene::store_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
+                          std::size_t face_count, std::uint32_t mesh_id) {
   mesh_ids_.push_back(mesh_id);
   impl_->vertices.emplace_back(vertices, vertices + 3 * vertex_count);
   impl_->faces.emplace_back(faces, faces + 3 * face_count);
   triangle_count_ += face_count;
 }
 
+void RayScene::add_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
+                        std::size_t face_count, std::uint32_t mesh_id) {
+  check_mesh(vertices, vertex_count, faces, face_count, mesh_id);
+  RTCGeometry geom = triangle_geometry(impl_->device, vertices, vertex_count, faces, face_count, mesh_id);
+  const unsigned geom_id = rtcAttachGeometry(impl_->scene, geom);
+  rtcReleaseGeometry(geom);
+  throw_device_error(impl_->device, "add_mesh");
+  if (geom_id != placements_.size()) throw std::logic_error("unexpected Embree geometry id");
+  for (std::size_t i = 0; i < vertex_count; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      bounds_.lower[a] = std::min(bounds_.lower[a], vertices[3 * i + a]);
+      bounds_.upper[a] = std::max(bounds_.upper[a], vertices[3 * i + a]);
+    }
+  }
+  placements_.push_back({static_cast<std::uint32_t>(mesh_ids_.size()), Vec3d{0, 0, 0}});
+  store_mesh(vertices, vertex_count, faces, face_count, mesh_id);
+  placed_triangle_count_ += face_count;
+}
+
+void RayScene::add_instanced_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
+                                  std::size_t face_count, const double* offsets, std::size_t offset_count,
+                                  std::uint32_t mesh_id) {
+  check_mesh(vertices, vertex_count, faces, face_count, mesh_id);
+  if (offset_count == 0) throw std::invalid_argument("mesh " + std::to_string(mesh_id) + " has no instance offsets");
+  for (std::size_t i = 0; i < 3 * offset_count; ++i) {
+    if (!std::isfinite(offsets[i])) {
+      throw std::invalid_argument("mesh " + std::to_string(mesh_id) + ": instance offset " + std::to_string(i / 3) +
+                                  " is not finite");
+    }
+  }
+  // One copy of the triangles in a child scene; each offset places it by an instance (translation only).
+  RTCScene child = rtcNewScene(impl_->device);
+  rtcSetSceneBuildQuality(child, RTC_BUILD_QUALITY_HIGH);
+  RTCGeometry geom = triangle_geometry(impl_->device, vertices, vertex_count, faces, face_count, mesh_id);
+  rtcAttachGeometry(child, geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(child);
+  impl_->children.push_back(child);
+  throw_device_error(impl_->device, "add_instanced_mesh (its mesh)");
+  Bounds3f local;
+  for (std::size_t i = 0; i < vertex_count; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      local.lower[a] = std::min(local.lower[a], vertices[3 * i + a]);
+      local.upper[a] = std::max(local.upper[a], vertices[3 * i + a]);
+    }
+  }
+  const auto slot = static_cast<std::uint32_t>(mesh_ids_.size());
+  for (std::size_t k = 0; k < offset_count; ++k) {
+    const Vec3d t{offsets[3 * k], offsets[3 * k + 1], offsets[3 * k + 2]};
+    RTCGeometry instance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(instance, child);
+    // Column-major 3x4: identity rotation, translation t.
+    const float xfm[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, float(t.x), float(t.y), float(t.z)};
+    rtcSetGeometryTransform(instance, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, xfm);
+    rtcCommitGeometry(instance);
+    const unsigned geom_id = rtcAttachGeometry(impl_->scene, instance);
+    rtcReleaseGeometry(instance);
+    if (geom_id != placements_.size()) throw std::logic_error("unexpected Embree geometry id");
+    placements_.push_back({slot, Vec3d(Vec3f(float(t.x), float(t.y), float(t.z)))});
+    for (int a = 0; a < 3; ++a) {
+      bounds_.lower[a] = std::min(bounds_.lower[a], local.lower[a] + float(t[a]));
+      bounds_.upper[a] = std::max(bounds_.upper[a], local.upper[a] + float(t[a]));
+    }
+  }
+  throw_device_error(impl_->device, "add_instanced_mesh (its instances)");
+  store_mesh(vertices, vertex_count, faces, face_count, mesh_id);
+  placed_triangle_count_ += face_count * offset_count;
+}
+
 void RayScene::commit() {
+  impl_->placements.clear();
+  for (const Placement& p : placements_) impl_->placements.emplace_back(p.slot, p.offset);
   rtcCommitScene(impl_->scene);
   throw_device_error(impl_->device, "scene commit (BVH build)");
   committed_ = true;
@@ -162,9 +240,12 @@ Hit RayScene::intersect(const Vec3f& origin, const Vec3f& direction, float tnear
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
   hit.t = rh.ray.tfar;
   hit.prim_id = rh.hit.primID;
-  hit.mesh_id = mesh_ids_[rh.hit.geomID];
-  const auto& v = impl_->vertices[rh.hit.geomID];
-  const auto& f = impl_->faces[rh.hit.geomID];
+  // An instance's hit names the instance in instID[0] and the child's geometry in geomID.
+  const unsigned top = rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID ? rh.hit.instID[0] : rh.hit.geomID;
+  const std::uint32_t slot = placements_[top].slot;  // translations leave the winding normal as it is
+  hit.mesh_id = mesh_ids_[slot];
+  const auto& v = impl_->vertices[slot];
+  const auto& f = impl_->faces[slot];
   const std::uint32_t* tri = &f[3 * static_cast<std::size_t>(rh.hit.primID)];
   const Vec3f p0(v[3 * tri[0]], v[3 * tri[0] + 1], v[3 * tri[0] + 2]);
   const Vec3f p1(v[3 * tri[1]], v[3 * tri[1] + 1], v[3 * tri[1] + 2]);
@@ -201,6 +282,7 @@ namespace {
 struct ClosestQuery {
   const std::vector<std::vector<float>>* vertices;
   const std::vector<std::vector<std::uint32_t>>* faces;
+  const std::vector<std::pair<std::uint32_t, Vec3d>>* placements;  // top-level geometry -> (slot, offset)
   Vec3d point;
   double distance;
   double slack;  // how far the float query centre may lie from `point`
@@ -208,10 +290,14 @@ struct ClosestQuery {
 
 bool closest_triangle(RTCPointQueryFunctionArguments* args) {
   auto* q = static_cast<ClosestQuery*>(args->userPtr);
-  const auto& v = (*q->vertices)[args->geomID];
-  const std::uint32_t* tri = &(*q->faces)[args->geomID][3 * static_cast<std::size_t>(args->primID)];
+  // Inside an instance (translation only, so distances are the same there) the query point moves into the
+  // mesh's own frame; the query itself stays in world space (Embree 3's convention).
+  const unsigned top = args->context->instStackSize > 0 ? args->context->instID[0] : args->geomID;
+  const auto& [slot, offset] = (*q->placements)[top];
+  const auto& v = (*q->vertices)[slot];
+  const std::uint32_t* tri = &(*q->faces)[slot][3 * static_cast<std::size_t>(args->primID)];
   auto corner = [&](int k) { return Vec3d(v[3 * tri[k]], v[3 * tri[k] + 1], v[3 * tri[k] + 2]); };
-  const double d = std::sqrt(triangle_distance2(q->point, corner(0), corner(1), corner(2)));
+  const double d = std::sqrt(triangle_distance2(q->point - offset, corner(0), corner(1), corner(2)));
   if (!(d < q->distance)) return false;
   q->distance = d;
   // Embree culls against a float radius around the float centre: keep the slack so that a triangle
@@ -234,7 +320,7 @@ double RayScene::closest_distance(const Vec3d& point, double radius) const {
   query.radius = static_cast<float>(radius + slack);
   RTCPointQueryContext context;
   rtcInitPointQueryContext(&context);
-  ClosestQuery q{&impl_->vertices, &impl_->faces, point, radius, slack};
+  ClosestQuery q{&impl_->vertices, &impl_->faces, &impl_->placements, point, radius, slack};
   rtcPointQuery(impl_->scene, &query, &context, closest_triangle, &q);
   return q.distance;
 }

@@ -5,6 +5,7 @@
 #include "check.hpp"
 #include "ptpb/ray_engine.hpp"
 
+using ptpb::Vec3d;
 using ptpb::Vec3f;
 
 namespace {
@@ -82,6 +83,57 @@ TEST_CASE("closest distance to the box from inside, outside, near faces, edges a
   // Bounded: nothing within the radius returns the radius.
   CHECK_CLOSE(scene.closest_distance(Vec3d(0.5, 0.5, 0.5), 0.25), 0.25, 0.0);
   CHECK_CLOSE(scene.closest_distance(Vec3d(5.0, 5.0, 5.0), 1.0), 1.0, 0.0);
+}
+
+TEST_CASE("instanced copies answer like copies placed by hand: hits, occlusion, closest distance") {
+  // The unit box at 3 x 3 offsets 1.5 m apart, once as instances of one mesh, once as nine meshes.
+  const float v[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 1, 0, 1, 0, 1, 1, 1, 1, 1};
+  const std::uint32_t f[] = {0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4,
+                             2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5};
+  std::vector<double> offsets;
+  for (int i = -1; i <= 1; ++i)
+    for (int j = -1; j <= 1; ++j) offsets.insert(offsets.end(), {1.5 * i, 1.5 * j, 0.25 * (i + j)});
+  ptpb::RayScene instanced, copies;
+  instanced.add_instanced_mesh(v, 8, f, 12, offsets.data(), 9, 5);
+  for (int k = 0; k < 9; ++k) {
+    float moved[24];
+    for (int q = 0; q < 24; ++q) moved[q] = v[q] + static_cast<float>(offsets[3 * k + q % 3]);
+    copies.add_mesh(moved, 8, f, 12, 5);
+  }
+  instanced.commit();
+  copies.commit();
+  CHECK(instanced.triangle_count() == 12 && instanced.placed_triangle_count() == 108);
+  CHECK(copies.triangle_count() == 108);
+  CHECK_CLOSE(double(instanced.bounds().lower.x), -1.5, 1e-7);
+  CHECK_CLOSE(double(instanced.bounds().upper.z), 1.5, 1e-7);
+  int hits = 0;
+  for (int n = 0; n < 2000; ++n) {
+    // A deterministic spread of rays through and around the block of boxes.
+    const double a = 0.61803398875 * n, b = 0.7548776662 * n, c = 0.5698402910 * n;
+    const Vec3f o(float(4.0 * (a - std::floor(a)) - 2.0), float(4.0 * (b - std::floor(b)) - 2.0),
+                  float(3.0 * (c - std::floor(c)) - 1.0));
+    const Vec3f d(float(std::cos(7.1 * n)), float(std::sin(3.3 * n)), float(std::cos(5.7 * n + 1.0)));
+    const ptpb::Hit hi = instanced.intersect(o, d), hc = copies.intersect(o, d);
+    CHECK(hi.valid() == hc.valid());
+    if (hi.valid() && hc.valid()) {
+      ++hits;
+      CHECK_NEAR(double(hi.t), double(hc.t), 1e-5);
+      CHECK(hi.mesh_id == 5 && hi.prim_id == hc.prim_id);
+      CHECK_NEAR(double(hi.normal.x), double(hc.normal.x), 1e-6);
+      CHECK_NEAR(double(hi.normal.z), double(hc.normal.z), 1e-6);
+    }
+    CHECK(instanced.occluded(o, d, 0.0f, 0.8f) == copies.occluded(o, d, 0.0f, 0.8f));
+    const Vec3d p(o.x, o.y, o.z);
+    CHECK_NEAR(instanced.closest_distance(p, 2.0), copies.closest_distance(p, 2.0), 1e-6);
+  }
+  CHECK(hits > 500);
+  // The centre of the middle box is 0.5 from its faces; the point between two boxes 0.25 from each.
+  CHECK_CLOSE(instanced.closest_distance(Vec3d(0.5, 0.5, 0.5), 10.0), 0.5, 1e-6);
+  CHECK_CLOSE(instanced.closest_distance(Vec3d(1.25, 0.5, 0.5), 10.0), 0.25, 1e-6);
+  ptpb::RayScene refused;
+  CHECK_THROWS(refused.add_instanced_mesh(v, 8, f, 12, offsets.data(), 0, 0));
+  const double bad[] = {0.0, NAN, 0.0};
+  CHECK_THROWS(refused.add_instanced_mesh(v, 8, f, 12, bad, 1, 0));
 }
 
 TEST_CASE("invalid meshes are refused with a reason") {

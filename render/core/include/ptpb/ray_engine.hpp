@@ -40,11 +40,19 @@ class RayScene {
   // empty meshes, non-finite vertices or out-of-range indices. Returns the mesh's slot.
   void add_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces, std::size_t face_count,
                 std::uint32_t mesh_id);
+  // The same mesh placed at each of `offset_count` translations (offsets: offset_count x 3, m) as Embree
+  // instances of one copy: memory stays that of one mesh however many are placed (DESIGN.md §13). Every
+  // copy answers with `mesh_id`. Throws std::invalid_argument on a non-finite offset or none at all.
+  void add_instanced_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
+                          std::size_t face_count, const double* offsets, std::size_t offset_count,
+                          std::uint32_t mesh_id);
   void commit();
   bool committed() const { return committed_; }
 
   std::size_t mesh_count() const { return mesh_ids_.size(); }
+  // Triangles stored (an instanced mesh counts once) and triangles placed (once per copy).
   std::size_t triangle_count() const { return triangle_count_; }
+  std::size_t placed_triangle_count() const { return placed_triangle_count_; }
   Bounds3f bounds() const { return bounds_; }
 
   // Single queries; directions need not be unit (t is then in units of |d|).
@@ -67,8 +75,19 @@ class RayScene {
   void require_committed() const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
-  std::vector<std::uint32_t> mesh_ids_;  // Embree geometry id -> caller's mesh id
+  void check_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces, std::size_t face_count,
+                  std::uint32_t mesh_id) const;
+  void store_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces, std::size_t face_count,
+                  std::uint32_t mesh_id);
+  std::vector<std::uint32_t> mesh_ids_;  // mesh slot -> caller's mesh id
+  // Per top-level Embree geometry: its mesh slot and its translation (zero for a plain mesh).
+  struct Placement {
+    std::uint32_t slot;
+    Vec3d offset;
+  };
+  std::vector<Placement> placements_;
   std::size_t triangle_count_ = 0;
+  std::size_t placed_triangle_count_ = 0;
   Bounds3f bounds_{};
   bool committed_ = false;
 };

@@ -37,6 +37,9 @@ struct Shape {
   int exterior = kVacuum;
   Vec3d albedo{0, 0, 0};    // Diffuse only
   Vec3d radiance{0, 0, 0};  // area emission, one-sided along the outward normal (W m^-2 sr^-1)
+  // K x 3 translations (m): the mesh stands at each of them, traced as instances of one copy (DESIGN.md §13);
+  // empty: once, where its vertices are. Together the copies (with any other shapes) must close the medium.
+  std::vector<double> offsets;
   bool is_emitter() const { return radiance.x > 0 || radiance.y > 0 || radiance.z > 0; }
 };
 
