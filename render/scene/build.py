@@ -189,8 +189,12 @@ def _tiled_field(obj: ObjectConfig, geometry_dir: Path, z_base: float) -> tuple[
     faces = np.concatenate([sheet.faces + counts[k] for k in range(9)] + [trial.faces + counts[9]])
     welded, inverse = np.unique(np.round(np.concatenate(pieces), 7), axis=0, return_inverse=True)
     _check_mesh(f"{obj.name} (3 x 3 tiles)", welded, inverse.reshape(-1)[faces])
-    as_mesh = lambda m: (m.vertices.astype(np.float32), m.faces.astype(np.uint32))  # noqa: E731
-    return as_mesh(sheet), field_mesh.tile_offsets(tile, obj.tiles), as_mesh(closure)
+    return _as_arrays(sheet), field_mesh.tile_offsets(tile, obj.tiles), _as_arrays(closure)
+
+
+def _as_arrays(mesh) -> Mesh:
+    """A geometry.mesh.TriangleMesh as the (float32 vertices, uint32 faces) pair the scene stage writes."""
+    return mesh.vertices.astype(np.float32), mesh.faces.astype(np.uint32)
 
 
 def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> None:
@@ -422,7 +426,6 @@ def build_scene(
             # The grown tile's surface placed tiles x tiles times as instances, closed by one set of walls.
             sheet, copies, closure = _tiled_field(obj, Path(geometry_dir or ""), float(np.min(vertices[:, 2])))
             pieces = [(obj.name, sheet, copies), (f"{obj.name}_walls", closure, None)]
-            extents.append(sheet[0])
         for name, piece, where in pieces:
             meshes.append((name, piece))
             offsets.append(where)
