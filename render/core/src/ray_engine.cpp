@@ -64,8 +64,9 @@ struct RayScene::Impl {
   // Own copies of the geometry, used for normals (and by later consumers of hits).
   std::vector<std::vector<float>> vertices;
   std::vector<std::vector<std::uint32_t>> faces;
-  std::vector<RTCScene> children;                           // one per instanced mesh, released with the scene
-  std::vector<std::pair<std::uint32_t, Vec3d>> placements;  // the point query's copy of placements_
+  std::vector<RTCScene> children;  // one per instanced mesh, released with the scene
+  // Per top-level Embree geometry: its mesh slot and its translation (zero for a plain mesh).
+  std::vector<std::pair<std::uint32_t, Vec3d>> placements;
 };
 
 RayScene::RayScene() : impl_(std::make_unique<Impl>()) {
@@ -125,7 +126,25 @@ RTCGeometry triangle_geometry(RTCDevice device, const float* vertices, std::size
   return geom;
 }
 
+Bounds3f mesh_bounds(const float* vertices, std::size_t vertex_count) {
+  Bounds3f b;
+  for (std::size_t i = 0; i < vertex_count; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      b.lower[a] = std::min(b.lower[a], vertices[3 * i + a]);
+      b.upper[a] = std::max(b.upper[a], vertices[3 * i + a]);
+    }
+  }
+  return b;
+}
+
 }  // namespace
+
+void RayScene::grow_bounds(const Bounds3f& local, const Vec3d& offset) {
+  for (int a = 0; a < 3; ++a) {
+    bounds_.lower[a] = std::min(bounds_.lower[a], local.lower[a] + float(offset[a]));
+    bounds_.upper[a] = std::max(bounds_.upper[a], local.upper[a] + float(offset[a]));
+  }
+}
 
 void RayScene::store_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces,
                           std::size_t face_count, std::uint32_t mesh_id) {
@@ -142,14 +161,9 @@ void RayScene::add_mesh(const float* vertices, std::size_t vertex_count, const s
   const unsigned geom_id = rtcAttachGeometry(impl_->scene, geom);
   rtcReleaseGeometry(geom);
   throw_device_error(impl_->device, "add_mesh");
-  if (geom_id != placements_.size()) throw std::logic_error("unexpected Embree geometry id");
-  for (std::size_t i = 0; i < vertex_count; ++i) {
-    for (int a = 0; a < 3; ++a) {
-      bounds_.lower[a] = std::min(bounds_.lower[a], vertices[3 * i + a]);
-      bounds_.upper[a] = std::max(bounds_.upper[a], vertices[3 * i + a]);
-    }
-  }
-  placements_.push_back({static_cast<std::uint32_t>(mesh_ids_.size()), Vec3d{0, 0, 0}});
+  if (geom_id != impl_->placements.size()) throw std::logic_error("unexpected Embree geometry id");
+  grow_bounds(mesh_bounds(vertices, vertex_count), Vec3d{0, 0, 0});
+  impl_->placements.emplace_back(static_cast<std::uint32_t>(mesh_ids_.size()), Vec3d{0, 0, 0});
   store_mesh(vertices, vertex_count, faces, face_count, mesh_id);
   placed_triangle_count_ += face_count;
 }
@@ -174,13 +188,7 @@ void RayScene::add_instanced_mesh(const float* vertices, std::size_t vertex_coun
   rtcCommitScene(child);
   impl_->children.push_back(child);
   throw_device_error(impl_->device, "add_instanced_mesh (its mesh)");
-  Bounds3f local;
-  for (std::size_t i = 0; i < vertex_count; ++i) {
-    for (int a = 0; a < 3; ++a) {
-      local.lower[a] = std::min(local.lower[a], vertices[3 * i + a]);
-      local.upper[a] = std::max(local.upper[a], vertices[3 * i + a]);
-    }
-  }
+  const Bounds3f local = mesh_bounds(vertices, vertex_count);
   const auto slot = static_cast<std::uint32_t>(mesh_ids_.size());
   for (std::size_t k = 0; k < offset_count; ++k) {
     const Vec3d t{offsets[3 * k], offsets[3 * k + 1], offsets[3 * k + 2]};
@@ -192,12 +200,10 @@ void RayScene::add_instanced_mesh(const float* vertices, std::size_t vertex_coun
     rtcCommitGeometry(instance);
     const unsigned geom_id = rtcAttachGeometry(impl_->scene, instance);
     rtcReleaseGeometry(instance);
-    if (geom_id != placements_.size()) throw std::logic_error("unexpected Embree geometry id");
-    placements_.push_back({slot, Vec3d(Vec3f(float(t.x), float(t.y), float(t.z)))});
-    for (int a = 0; a < 3; ++a) {
-      bounds_.lower[a] = std::min(bounds_.lower[a], local.lower[a] + float(t[a]));
-      bounds_.upper[a] = std::max(bounds_.upper[a], local.upper[a] + float(t[a]));
-    }
+    if (geom_id != impl_->placements.size()) throw std::logic_error("unexpected Embree geometry id");
+    const Vec3d placed(Vec3f(float(t.x), float(t.y), float(t.z)));  // as Embree holds the transform
+    impl_->placements.emplace_back(slot, placed);
+    grow_bounds(local, placed);
   }
   throw_device_error(impl_->device, "add_instanced_mesh (its instances)");
   store_mesh(vertices, vertex_count, faces, face_count, mesh_id);
@@ -205,8 +211,6 @@ void RayScene::add_instanced_mesh(const float* vertices, std::size_t vertex_coun
 }
 
 void RayScene::commit() {
-  impl_->placements.clear();
-  for (const Placement& p : placements_) impl_->placements.emplace_back(p.slot, p.offset);
   rtcCommitScene(impl_->scene);
   throw_device_error(impl_->device, "scene commit (BVH build)");
   committed_ = true;
@@ -242,7 +246,7 @@ Hit RayScene::intersect(const Vec3f& origin, const Vec3f& direction, float tnear
   hit.prim_id = rh.hit.primID;
   // An instance's hit names the instance in instID[0] and the child's geometry in geomID.
   const unsigned top = rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID ? rh.hit.instID[0] : rh.hit.geomID;
-  const std::uint32_t slot = placements_[top].slot;  // translations leave the winding normal as it is
+  const std::uint32_t slot = impl_->placements[top].first;  // translations leave the winding normal as it is
   hit.mesh_id = mesh_ids_[slot];
   const auto& v = impl_->vertices[slot];
   const auto& f = impl_->faces[slot];

@@ -79,13 +79,9 @@ class RayScene {
                   std::uint32_t mesh_id) const;
   void store_mesh(const float* vertices, std::size_t vertex_count, const std::uint32_t* faces, std::size_t face_count,
                   std::uint32_t mesh_id);
+  // Adds the box of a mesh whose own box is `local`, moved by `offset`, to bounds_.
+  void grow_bounds(const Bounds3f& local, const Vec3d& offset);
   std::vector<std::uint32_t> mesh_ids_;  // mesh slot -> caller's mesh id
-  // Per top-level Embree geometry: its mesh slot and its translation (zero for a plain mesh).
-  struct Placement {
-    std::uint32_t slot;
-    Vec3d offset;
-  };
-  std::vector<Placement> placements_;
   std::size_t triangle_count_ = 0;
   std::size_t placed_triangle_count_ = 0;
   Bounds3f bounds_{};
