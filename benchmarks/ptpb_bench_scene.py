@@ -96,6 +96,7 @@ def reference(scene_dir: Path, cfg) -> Reference:
             "scene": _scene_digest(scene_dir),
             "window_shift_opl": disk_sun_opl_shift(scene, scene_dir),  # the time axis the frames are on
             "spp": spp,
+            "downsample": cfg.downsample,  # the film the reference renders on
             "rr_depth": cfg.rr_depth,
             "seeds": REFERENCE_SEEDS,
             "mitsuba": mitsuba.__version__,

@@ -127,6 +127,14 @@ class PTPBConfig(StrictModel):
         "can light no frame is rouletted back to one. Pays where late frames are the noisy ones (snow's diffusion "
         "tail under the sun: the demo uses 3); costs where they are not (render/core/DESIGN.md §12) [-].",
     )
+    path_hops: bool = Field(
+        True,
+        description="Shell transport for path-traced camera paths in isotropically scattering media: deep in the "
+        "medium a walk crosses a surface-free ball in one step drawn from tabulated exit laws (path length, "
+        "direction, collisions), with its time and absorption exact and next-event estimation kept unbiased by a "
+        "roulette on the ball's margin. Off only to compare against the collision-by-collision walk "
+        "(render/core/DESIGN.md §12, 'Hops') [-].",
+    )
     # In a pipeline config the next four come from scene.max_depth, scene.rr_depth and the root's seed and
     # threads (pipeline/schema/__init__.py refuses them here); they are fields for direct use of the API.
     max_depth: int = Field(

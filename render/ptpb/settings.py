@@ -97,6 +97,7 @@ def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
         "dense_optical_radius": cfg.dense_optical_radius,
         "path_max_survival": cfg.path_max_survival,
         "path_splits": cfg.path_splits,
+        "path_hops": cfg.path_hops,
         "max_depth": cfg.max_depth,
         "rr_depth": cfg.rr_depth,
         "seed": cfg.seed,

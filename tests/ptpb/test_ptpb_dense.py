@@ -106,8 +106,9 @@ def test_auto_picks_paths_where_beams_would_be_biased(sigma_t, radius, paths):
     assert r.steady.mean() > 0
 
 
-def test_paths_are_bit_identical_across_threads_and_sum_to_steady():
-    scene = dense_cube(400.0, 0.9995, 0.85, mode="bins")
+@pytest.mark.parametrize("g", [0.85, 0.0], ids=["hg", "isotropic-with-hops"])
+def test_paths_are_bit_identical_across_threads_and_sum_to_steady(g):
+    scene = dense_cube(400.0, 0.9995, g, mode="bins")
     scene["film"] = {"frame_mode": "bins", "temporal_bins": 60, "start_opl": 3.0, "bin_width_opl": 0.05}
     # With splitting in time: a split path's copies draw their streams from the path's own.
     runs = [
@@ -118,6 +119,8 @@ def test_paths_are_bit_identical_across_threads_and_sum_to_steady():
     assert len(digests) == 1
     r = runs[0]
     assert r.stats["path_media"] == 1 and r.stats["path_connections"] > 0 and r.stats["path_splits"] > 0
+    # Hops (DESIGN.md §12) only where the phase function is isotropic; their tables are the same in every run.
+    assert (r.stats["path_hops"] > 0) == (g == 0.0)
     total = r.frames.sum(axis=0) + r.early + r.late
     np.testing.assert_allclose(total, r.steady, rtol=1e-4, atol=1e-7 * r.steady.max())
     # The window holds most of the light. Over three iterations the late tail's share is noisy: 0-18 % over
@@ -437,6 +440,37 @@ def test_splitting_in_time_keeps_the_estimate_and_quiets_the_tail():
         error = np.hypot(*(v.std(ddof=1) / np.sqrt(v.size) for v in x.values()))
         print(f"{name}: split / unsplit {x[3].mean() / x[0].mean():.4f}, standard error {error / x[0].mean():.4f}")
         assert abs(x[3].mean() - x[0].mean()) < 4 * error + 1e-3 * x[0].mean()
+
+
+def test_hops_keep_every_frame_and_the_mean_time():
+    """Shell transport (DESIGN.md §12, "Hops") on the dense cube at albedo 0.9999, where hops carry most of
+    the path length (about 60 %): each frame holding over 1 % of the energy and the mean OPL of the light
+    must be those of the collision-by-collision walk, the frames within 1 % or three standard errors of the
+    difference, the mean OPL within 0.5 %. Six seeds of each; with the hop's time left out of the OPL the
+    mean time falls by tens of per cent, with its absorption left out the late frames rise."""
+    scene = dense_cube(400.0, 0.9999, 0.0, mode="bins", res=16)
+    scene["film"] = {"frame_mode": "bins", "temporal_bins": 12, "start_opl": 3.0, "bin_width_opl": 0.5}
+    centres = 3.0 + (np.arange(12) + 0.5) * 0.5
+    energy, stats = {}, {}
+    for hops in (False, True):
+        runs = [render(scene, settings(iterations=600, seed=k, path_hops=hops)) for k in range(6)]
+        energy[hops] = np.array([r.frames.sum(axis=(1, 2, 3)) for r in runs])
+        stats[hops] = runs[0].stats
+    skipped = stats[True]["path_hop_scatterings"]
+    share = skipped / (skipped + stats[True]["path_vertices"])
+    print(
+        f"collisions hopped over: {share:.3f}; vertices {stats[False]['path_vertices']} -> {stats[True]['path_vertices']}"
+    )
+    assert stats[False]["path_hops"] == 0 and share > 0.5
+    mean = {k: e.mean(axis=0) for k, e in energy.items()}
+    error = np.hypot(*(e.std(axis=0, ddof=1) / np.sqrt(e.shape[0]) for e in energy.values()))
+    held = mean[False] > 0.01 * mean[False].sum()
+    ratio = mean[True][held] / mean[False][held]
+    print("frames, hops / none:", np.round(ratio, 4), "standard error:", np.round(error[held] / mean[False][held], 4))
+    assert np.all(np.abs(mean[True] - mean[False])[held] < np.maximum(0.01 * mean[False], 3 * error)[held])
+    opl = {k: (m * centres).sum() / m.sum() for k, m in mean.items()}
+    print(f"mean OPL: hops {opl[True]:.4f} m, none {opl[False]:.4f} m")
+    assert opl[True] == pytest.approx(opl[False], rel=0.005)
 
 
 @pytest.mark.mitsuba

@@ -125,6 +125,8 @@ void for_each_stat(Stats& s, Visit&& visit) {
   visit("path_clearance_queries", s.path_clearance_queries);
   visit("path_clear_flights", s.path_clear_flights);
   visit("path_splits", s.path_splits);
+  visit("path_hops", s.path_hops);
+  visit("path_hop_scatterings", s.path_hop_scatterings);
   visit("path_media", s.path_media);
   visit("specular_beams", s.specular_beams);
   visit("specular_pairs", s.specular_pairs);
@@ -293,6 +295,7 @@ RenderSettings parse_settings(const py::dict& d) {
   s.dense_optical_radius = get<double>(d, "dense_optical_radius", s.dense_optical_radius, w);
   s.path_max_survival = get<double>(d, "path_max_survival", s.path_max_survival, w);
   s.path_splits = get<int>(d, "path_splits", s.path_splits, w);
+  s.path_hops = get<bool>(d, "path_hops", s.path_hops, w);
   s.max_depth = get<int>(d, "max_depth", s.max_depth, w);
   s.rr_depth = get<int>(d, "rr_depth", s.rr_depth, w);
   s.seed = get<std::uint64_t>(d, "seed", 0, w);

@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "ptpb/free_flight.hpp"
+#include "ptpb/hops.hpp"
 #include "ptpb/sampling.hpp"
 
 namespace ptpb {
@@ -31,6 +32,51 @@ constexpr double kClearanceReach = 32.0;
 // the late frames of the diffusion slab, lit from deep vertices only, grew noisy enough to bias their
 // log-fit (sigma_a +4 to +6 %); at 1e-4 they match the roulette-free renderer.
 constexpr double kNeeBound = 1e-4;
+
+// Shell transport (DESIGN.md §12, "Hops"). At a scattering vertex x with clearance c, in a medium that
+// scatters isotropically, the walk until it first leaves the ball B(x, R) is replaced by one exit drawn from
+// the tables of hops.hpp: a point on the sphere, a direction, a path length L and n inner collisions, with
+// time tau += ior L and weight exp(-sigma_a L) per channel (times the ratio of the channels' scattering
+// densities, (sigma_s,c / sigma_s,h)^n exp(-(sigma_s,c - sigma_s,h) L), where sigma_s is chromatic and the
+// walk was drawn for channel h). The vertices it skips lie at least m = c - R from every surface, so their
+// next-event estimates are at most exp(-sigma_t,min m) of an unshadowed one. The hop is therefore taken with
+// probability 1 - q, q = min(1, exp(-sigma_t,min m) / kNeeBound); with probability q the walk goes on in
+// detail, and inside the ball its next-event estimates (kept with probability nee_keep / q, which is at
+// most 1) and the light its flights meet directly count 1/q. The light an exit flight would meet directly is
+// the skipped vertices' and is not counted. Every estimate keeps its expectation, and no kept next-event
+// estimate weighs more than without hops. R is the table radius that saves the most collisions,
+// (1 - q) times the table's mean, if that is at least kHopMinSaving.
+constexpr double kHopMinSaving = 4.0;
+// In a chromatic medium the log of a channel's weight after a hop of n collisions spreads by about
+// n delta^2 (delta the channels' relative spread in sigma_s); tables whose mean n delta^2 exceeds this are
+// not used.
+constexpr double kHopChromaticSpread = 0.1;
+// Where hops are possible the clearance query searches this many of the thinnest channel's mean free paths.
+constexpr double kHopClearanceReach = 64.0;
+
+// Whether the medium of a vertex allows hops, and the constants a hop needs.
+struct HopMedium {
+  bool on = false;
+  double sigma_t_min = 0.0;  // the thinnest channel's extinction: the bound of the skipped estimates
+  double delta2 = 0.0;       // largest (sigma_s,c / sigma_s,min - 1)^2
+  double useful = 0.0;       // the least clearance at which a hop can save kHopMinSaving collisions
+};
+
+HopMedium hop_medium(const CompiledScene& cs, const RenderSettings& st, int medium) {
+  HopMedium h;
+  if (!st.path_hops || st.max_depth >= 0 || !cs.lights_beyond_surfaces() || !cs.scattering(medium)) return h;
+  const Medium& m = cs.scene().media[medium];
+  const double smin = min_component(m.sigma_s), smax = max_component(m.sigma_s);
+  if (m.g != 0.0 || !(smin > 0)) return h;
+  h.on = true;
+  h.sigma_t_min = min_component(m.sigma_t());
+  h.delta2 = (smax / smin - 1.0) * (smax / smin - 1.0);
+  // The smallest table with a mean above kHopMinSaving, behind a margin where q = 1/e.
+  int k = 0;
+  while (k + 1 < kHopTables && hop_mean_scatterings(k) < kHopMinSaving) ++k;
+  h.useful = (std::log(1.0 / kNeeBound) + 1.0) / h.sigma_t_min + hop_radius(k) / smax;
+  return h;
+}
 
 // Splitting in time (DESIGN.md §12, "Splitting in time"): in a bins or gate film a path stands for n = 2^l
 // copies of itself, l the number of the thresholds W/2^L, ..., W/4, W/2 (W the film's length, L =
@@ -115,6 +161,8 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
   auto within_depth = [&](int interactions) { return st.max_depth < 0 || interactions + 1 <= st.max_depth; };
 
   PathVertex v = start;
+  HopMedium hm;  // of medium hop_of, refreshed when the walk enters another medium
+  int hop_of = -2;
   for (int guard = 0; guard < 10000000; ++guard) {
     if (!within_depth(v.interactions)) return;
     // Splitting in time: the copies this path should stand for at this vertex.
@@ -137,26 +185,48 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
     }
     ++ts.path_vertices;
     const double g = v.surface ? 0.0 : scene.media[v.medium].g;
+    // Inside the ball of a hop not taken: the detailed branch, whose direct light counts 1/hop_keep.
+    const bool inner = !v.surface && v.hop_radius > 0 && length(v.position - v.hop_centre) < v.hop_radius;
+    if (!inner) v.hop_radius = 0.0;
+    const double inner_weight = inner ? 1.0 / v.hop_keep : 1.0;
     // 0. The vertex's clearance: how far it is from every surface (medium vertices only).
     double clearance = 0.0, nee_keep = 1.0;
     if (!v.surface) {
+      if (hop_of != v.medium) {
+        hm = hop_medium(cs, st, v.medium);
+        hop_of = v.medium;
+      }
       const Vec3d sigma_t = scene.media[v.medium].sigma_t();
-      clearance = v.clear_radius > 0 ? v.clear_radius - length(v.position - v.clear_centre) : 0.0;
-      if (clearance < kClearanceRequery / max_component(sigma_t)) {
-        const double thinnest = min_component(sigma_t);
-        const double diameter = 2.0 * cs.sphere_radius();
-        const double reach = thinnest > 0 ? std::min(kClearanceReach / thinnest, diameter) : diameter;
-        clearance = cs.clearance(v.position, reach);
+      const double from_centre = length(v.position - v.clear_centre);
+      clearance = v.clear_radius > 0 ? v.clear_radius - from_centre : 0.0;
+      if (inner) clearance = std::max(clearance, v.hop_clear - length(v.position - v.hop_centre));
+      const double thinnest = min_component(sigma_t);
+      const double diameter = 2.0 * cs.sphere_radius();
+      const double reach =
+          thinnest > 0 ? std::min((hm.on ? kHopClearanceReach : kClearanceReach) / thinnest, diameter) : diameter;
+      // Asked again where a hop might fit: the nearest surface may be as far as clear_radius + |p - q| when
+      // the last query found one, and the walk has moved two mean free paths since.
+      const bool hop_worth_asking = hm.on && !inner && clearance < hm.useful &&
+                                    (v.clear_radius >= 0.999 * reach || v.clear_radius + from_centre >= hm.useful) &&
+                                    from_centre * thinnest >= 2.0;
+      if (clearance < kClearanceRequery / max_component(sigma_t) || hop_worth_asking) {
+        // The last query found a surface at clear_radius from its centre, so none is farther than that plus
+        // the walk's displacement: a search bounded there visits fewer triangles and finds the same one.
+        const bool bounded = v.clear_radius > 0 && v.clear_radius < 0.999 * reach;
+        clearance =
+            cs.clearance(v.position, bounded ? std::min(reach, 1.001 * (v.clear_radius + from_centre) + 1e-9) : reach);
         v.clear_centre = v.position;
         v.clear_radius = clearance;
         ++ts.path_clearance_queries;
       }
       if (clearance > 0 && cs.lights_beyond_surfaces())
-        nee_keep = std::min(1.0, std::exp(-min_component(sigma_t) * clearance) / kNeeBound);
+        nee_keep = std::min(1.0, std::exp(-thinnest * clearance) / kNeeBound);
     }
-    // 1. Next-event estimation (kept with probability nee_keep).
+    // 1. Next-event estimation, kept with probability nee_prob (nee_keep, or nee_keep / hop_keep inside the
+    // ball of a hop not taken, which counts 1/hop_keep).
     LightConnection c;
-    const bool nee = nee_keep >= 1.0 || rng.next_double() < nee_keep;
+    const double nee_prob = std::min(1.0, nee_keep * inner_weight);
+    const bool nee = nee_prob >= 1.0 || rng.next_double() < nee_prob;
     if (nee && cs.connect_light(rng, v.position, v.medium, !v.surface, c)) {
       double f, pdf_scatter;
       if (v.surface) {
@@ -170,36 +240,83 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       }
       if (f > 0) {
         const double mis = c.pdf > 0 ? power_heuristic(c.pdf, pdf_scatter) : 1.0;
-        Vec3d value = v.weight * c.value * (f * mis / nee_keep);
+        Vec3d value = v.weight * c.value * (f * mis * inner_weight / nee_prob);
         if (v.surface) value = value * v.albedo;
         splat.add(v.tau + c.tau - unwarp, value, c.timeless, T);
         ++ts.path_connections;
       }
     }
-    // 2. The next direction: weight f/pdf is 1 for HG and the albedo for Lambert.
-    const double u1 = rng.next_double(), u2 = rng.next_double();
-    Vec3d dir;
-    double pdf_dir;
+    // 2. A hop across the vertex's surface-free ball, or the next direction (weight f/pdf is 1 for HG and the
+    // albedo for Lambert). `direct` weighs the light that the coming flight meets directly: 1, 1/hop_keep from
+    // inside the ball of a hop not taken, 0 after a hop.
+    Vec3d dir, pos = v.position;
+    double pdf_dir = 0.0, tau = v.tau, direct = inner_weight, start_clearance = clearance;
     Vec3d weight = v.weight;
-    if (v.surface) {
-      dir = sample_cosine_hemisphere(v.normal, u1, u2);
-      pdf_dir = std::max(0.0, dot(dir, v.normal)) / kPi;
-      weight = weight * v.albedo;
-    } else {
-      dir = hg_sample(v.incoming, g, u1, u2);
-      pdf_dir = hg_eval(dot(dir, v.incoming), g);
-    }
     int interactions = v.interactions;
+    bool hopped = false;
+    if (hm.on && !inner && clearance >= hm.useful) {
+      const Medium& m = scene.media[v.medium];
+      const int h = pick_channel(channel_probabilities(weight), rng.next_double());
+      const double sh = m.sigma_s[h];
+      int best = -1;
+      double best_saving = kHopMinSaving, best_keep = 1.0;
+      for (int k = 0; k < kHopTables; ++k) {
+        const double margin = clearance - hop_radius(k) / sh;
+        const double mean = hop_mean_scatterings(k);
+        if (margin <= 0 || mean * hm.delta2 > kHopChromaticSpread) break;
+        const double keep = std::min(1.0, std::exp(-hm.sigma_t_min * margin) / kNeeBound);
+        if ((1.0 - keep) * mean > best_saving) {
+          best = k;
+          best_saving = (1.0 - keep) * mean;
+          best_keep = keep;
+        }
+      }
+      if (best >= 0) {
+        const double radius = hop_radius(best) / sh;
+        if (rng.next_double() < best_keep) {
+          v.hop_centre = v.position;
+          v.hop_radius = radius;
+          v.hop_keep = best_keep;
+          v.hop_clear = clearance;
+          direct = 1.0 / best_keep;
+        } else {
+          const HopExit e = sample_hop(best, rng.next_double());
+          const Vec3d normal = sample_uniform_sphere(rng.next_double(), rng.next_double());
+          pos = v.position + normal * radius;
+          dir = from_frame(normal, e.cosine, 2.0 * kPi * rng.next_double());
+          const double L = e.length / sh;
+          const double n = e.scatterings;
+          for (int ch = 0; ch < 3; ++ch)
+            weight[ch] *= std::exp(n * std::log(m.sigma_s[ch] / sh) - (m.sigma_s[ch] - sh) * L - m.sigma_a[ch] * L);
+          tau += m.ior * L;
+          interactions += static_cast<int>(std::min<std::uint32_t>(e.scatterings, 1u << 30));
+          start_clearance = v.clear_radius - length(pos - v.clear_centre);
+          direct = 0.0;
+          hopped = true;
+          ++ts.path_hops;
+          ts.path_hop_scatterings += e.scatterings;
+        }
+      }
+    }
+    if (!hopped) {
+      const double u1 = rng.next_double(), u2 = rng.next_double();
+      if (v.surface) {
+        dir = sample_cosine_hemisphere(v.normal, u1, u2);
+        pdf_dir = std::max(0.0, dot(dir, v.normal)) / kPi;
+        weight = weight * v.albedo;
+      } else {
+        dir = hg_sample(v.incoming, g, u1, u2);
+        pdf_dir = hg_eval(dot(dir, v.incoming), g);
+      }
+    }
     if (interactions >= st.rr_depth) {
       const double q = std::min(st.path_max_survival, max_component(weight) * copies);
       if (!(rng.next_double() < q)) return;
       weight = weight / q;
     }
     // 3. Along dir through boundaries to the next vertex, an emitter or the sky.
-    Vec3d pos = v.position;
     const Vec3d origin = pos;
     int medium = v.medium;
-    double tau = v.tau;
     bool null_chain = true;  // only index-matched crossings since the vertex: NEE could make this path
     bool next = false;
     for (int hop = 0; hop < 100000 && !next; ++hop) {
@@ -208,7 +325,7 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       const Vec3d prob = channel_probabilities(weight);
       const double s = scattering ? sample_free_flight(sigma_t, prob, rng) : 0.0;
       // Inside the clearance sphere no surface can end the flight: no ray needed.
-      const bool clear = hop == 0 && scattering && s < clearance;
+      const bool clear = hop == 0 && scattering && s < start_clearance;
       const SurfaceHit hit = clear ? SurfaceHit{} : cs.intersect(pos, dir, hop == 0 && !v.surface);
       const double dist = hit.valid ? hit.t : std::numeric_limits<double>::infinity();
       if (scattering) {
@@ -216,8 +333,9 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
         if (clear || s < dist) {
           const Vec3d tr = transmittance(sigma_t, s);
           weight = weight * (m.sigma_s * tr) / pdf_mixture(sigma_t, tr, prob);
-          const Vec3d clear_centre = v.clear_centre;
+          const Vec3d clear_centre = v.clear_centre, hop_centre = v.hop_centre;
           const double clear_radius = clear ? v.clear_radius : 0.0;
+          const double hop_radius = v.hop_radius, hop_keep = v.hop_keep, hop_clear = v.hop_clear;
           v = PathVertex{};
           v.position = pos + dir * s;
           v.incoming = dir;
@@ -227,6 +345,10 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
           v.interactions = interactions + 1;
           v.clear_centre = clear_centre;
           v.clear_radius = clear_radius;
+          v.hop_centre = hop_centre;
+          v.hop_radius = hop_radius;
+          v.hop_keep = hop_keep;
+          v.hop_clear = hop_clear;
           ts.path_clear_flights += clear ? 1 : 0;
           next = true;
           break;
@@ -238,9 +360,9 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
         weight = weight * transmittance(scene.media[medium].sigma_t(), dist);
       }
       if (!hit.valid) {
-        if (sky && within_depth(interactions)) {
+        if (sky && within_depth(interactions) && direct > 0) {
           const double mis = null_chain ? power_heuristic(pdf_dir, cs.sky_light_pdf(dir)) : 1.0;
-          splat.add(0.0, weight * scene.environment_radiance * mis, true, T);
+          splat.add(0.0, weight * scene.environment_radiance * (mis * direct), true, T);
         }
         return;
       }
@@ -248,11 +370,11 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       tau += cs.ior(medium) * dist;
       pos = hit.position;
       const Shape& shape = scene.shapes[hit.shape];
-      if (shape.is_emitter() && hit.entering && within_depth(interactions)) {
+      if (shape.is_emitter() && hit.entering && within_depth(interactions) && direct > 0) {
         double mis = 1.0;
         if (null_chain)
           mis = power_heuristic(pdf_dir, cs.area_light_pdf(hit.shape, length(pos - origin), -dot(dir, hit.normal)));
-        splat.add(tau - unwarp, weight * shape.radiance * mis, false, T);
+        splat.add(tau - unwarp, weight * shape.radiance * (mis * direct), false, T);
       }
       const Vec3d facing = hit.entering ? hit.normal : -hit.normal;
       if (shape.kind == SurfaceKind::Null) {

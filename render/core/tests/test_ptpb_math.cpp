@@ -5,6 +5,7 @@
 
 #include "check.hpp"
 #include "ptpb/beam_geometry.hpp"
+#include "ptpb/hops.hpp"
 #include "ptpb/kernels.hpp"
 #include "ptpb/rng.hpp"
 #include "ptpb/sampling.hpp"
@@ -194,3 +195,58 @@ TEST_CASE("OPL to picoseconds") {
 }
 
 PTPB_TEST_MAIN()
+
+// Shell transport (DESIGN.md §12, "Hops"): a table composed of smaller tables holds the same exits as
+// walks taken one flight at a time, and a large ball's mean path length approaches diffusion theory.
+TEST_CASE("hop tables: composed exits match single-flight walks, large balls match diffusion") {
+  const int k = 4;  // R = 8 scattering lengths, composed from tables 0..3
+  const double R = hop_radius(k);
+  CHECK_NEAR(R, 8.0, 1e-12);
+  const int n = 40000;
+  double sl = 0, sl2 = 0, sc = 0, sn = 0;
+  for (int i = 0; i < n; ++i) {
+    KeyedRng rng(3, 0, StreamDomain::Test, i);
+    Vec3d p{};
+    Vec3d d = sample_uniform_sphere(rng.next_double(), rng.next_double());
+    double travelled = 0.0;
+    int inner = 0;
+    for (;;) {
+      const double s = -std::log1p(-rng.next_double());
+      const double b = dot(p, d), c = dot(p, p) - R * R;
+      const double exit = -b + std::sqrt(b * b - c);
+      if (s >= exit) {
+        travelled += exit;
+        sc += dot(d, p + d * exit) / R;
+        break;
+      }
+      p = p + d * s;
+      travelled += s;
+      ++inner;
+      d = sample_uniform_sphere(rng.next_double(), rng.next_double());
+    }
+    sl += travelled;
+    sl2 += travelled * travelled;
+    sn += inner;
+  }
+  double tl = 0, tc = 0, tn = 0;
+  for (int i = 0; i < kHopSamples; ++i) {
+    const HopExit e = sample_hop(k, (i + 0.5) / kHopSamples);
+    tl += e.length;
+    tc += e.cosine;
+    tn += e.scatterings;
+  }
+  const double mean = sl / n, sd = std::sqrt(sl2 / n - mean * mean);
+  const double se = sd * std::sqrt(1.0 / n + 1.0 / kHopSamples);
+  CHECK_NEAR(tl / kHopSamples, mean, 4 * se);
+  CHECK_NEAR(tn / kHopSamples, sn / n, 4 * se);  // one scattering per unit length, within the same noise
+  CHECK_NEAR(tc / kHopSamples, sc / n, 0.01);
+  CHECK_NEAR(hop_mean_scatterings(k), tn / kHopSamples, 1e-9);
+  // Diffusion with the extrapolated boundary R_e = R + 0.7104 (Milne): mean track length from a point source at
+  // the centre = 3 (R^2/2 - R^3/(3 R_e)); exact only as R grows, so within 3 % at the largest table.
+  const int last = kHopTables - 1;
+  const double Rl = hop_radius(last), Re = Rl + 0.7104;
+  double ll = 0;
+  for (int i = 0; i < kHopSamples; i += 4) ll += sample_hop(last, (i + 0.5) / kHopSamples).length;
+  ll /= kHopSamples / 4;
+  CHECK_NEAR(ll / (3.0 * (Rl * Rl / 2.0 - Rl * Rl * Rl / (3.0 * Re))), 1.0, 0.03);
+}

@@ -31,10 +31,13 @@ inline Vec3d channel_probabilities(const Vec3d& w) {
 }
 // A channel picked with probabilities `prob`, then its exponential; infinite for a channel without
 // extinction (whose second draw is then not made).
+inline int pick_channel(const Vec3d& prob, double u) {
+  const int channel = u < prob.x ? 0 : (u < prob.x + prob.y ? 1 : 2);
+  if (!(prob[channel] > 0)) return prob.y > 0 ? 1 : 0;  // rounding at the top of the unit interval
+  return channel;
+}
 inline double sample_free_flight(const Vec3d& sigma_t, const Vec3d& prob, KeyedRng& rng) {
-  const double u = rng.next_double();
-  int channel = u < prob.x ? 0 : (u < prob.x + prob.y ? 1 : 2);
-  if (!(prob[channel] > 0)) channel = prob.y > 0 ? 1 : 0;  // rounding at the top of the unit interval
+  const int channel = pick_channel(prob, rng.next_double());
   if (!(sigma_t[channel] > 0)) return std::numeric_limits<double>::infinity();
   return -std::log1p(-rng.next_double()) / sigma_t[channel];
 }

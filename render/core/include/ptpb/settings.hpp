@@ -48,6 +48,9 @@ struct RenderSettings {
   // its OPL past its first vertex passes W/2^L, ..., W/2 (W the film's length, L = path_splits), and goes
   // back to one path once it can light no frame.
   int path_splits = 0;  // at most kMaxPathSplits
+  // Shell transport (§12, "Hops"): deep in an isotropically scattering medium a path-traced walk crosses a
+  // surface-free ball in one step drawn from tabulated exit laws, its time and absorption exact.
+  bool path_hops = true;
   int max_depth = -1;   // Mitsuba meaning; -1 unbounded
   int rr_depth = 5;
   std::uint64_t seed = 0;
