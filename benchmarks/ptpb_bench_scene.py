@@ -96,7 +96,8 @@ def reference(scene_dir: Path, cfg) -> Reference:
             "scene": _scene_digest(scene_dir),
             "window_shift_opl": disk_sun_opl_shift(scene, scene_dir),  # the time axis the frames are on
             "spp": spp,
-            "downsample": cfg.downsample,  # the film the reference renders on
+            # The film the reference renders on; keyed only when coarser, so full-size caches stay valid.
+            **({"downsample": cfg.downsample} if cfg.downsample != 1 else {}),
             "rr_depth": cfg.rr_depth,
             "seeds": REFERENCE_SEEDS,
             "mitsuba": mitsuba.__version__,

@@ -131,8 +131,9 @@ class PTPBConfig(StrictModel):
         True,
         description="Shell transport for path-traced camera paths in isotropically scattering media: deep in the "
         "medium a walk crosses a surface-free ball in one step drawn from tabulated exit laws (path length, "
-        "direction, collisions), with its time and absorption exact and next-event estimation kept unbiased by a "
-        "roulette on the ball's margin. Off only to compare against the collision-by-collision walk "
+        "direction, collisions), with its time and absorption exact; one of the skipped events, weighted to stand "
+        "for all of them, makes their next-event estimate. Off only to compare against the collision-by-collision "
+        "walk "
         "(render/core/DESIGN.md §12, 'Hops') [-].",
     )
     # In a pipeline config the next four come from scene.max_depth, scene.rr_depth and the root's seed and

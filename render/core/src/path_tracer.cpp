@@ -33,20 +33,20 @@ constexpr double kClearanceReach = 32.0;
 // log-fit (sigma_a +4 to +6 %); at 1e-4 they match the roulette-free renderer.
 constexpr double kNeeBound = 1e-4;
 
-// Shell transport (DESIGN.md §12, "Hops"). At a scattering vertex x with clearance c, in a medium that
-// scatters isotropically, the walk until it first leaves the ball B(x, R) is replaced by one exit drawn from
-// the tables of hops.hpp: a point on the sphere, a direction, a path length L and n inner collisions, with
-// time tau += ior L and weight exp(-sigma_a L) per channel (times the ratio of the channels' scattering
-// densities, (sigma_s,c / sigma_s,h)^n exp(-(sigma_s,c - sigma_s,h) L), where sigma_s is chromatic and the
-// walk was drawn for channel h). The vertices it skips lie at least m = c - R from every surface, so their
-// next-event estimates are at most exp(-sigma_t,min m) of an unshadowed one. The hop is therefore taken with
-// probability 1 - q, q = min(1, exp(-sigma_t,min m) / kNeeBound); with probability q the walk goes on in
-// detail, and inside the ball its next-event estimates (kept with probability nee_keep / q, which is at
-// most 1) and the light its flights meet directly count 1/q. The light an exit flight would meet directly is
-// the skipped vertices' and is not counted. Every estimate keeps its expectation, and no kept next-event
-// estimate weighs more than without hops. R is the table radius that saves the most collisions,
-// (1 - q) times the table's mean, if that is at least kHopMinSaving.
+// Hops (DESIGN.md §12, "Hops"). At a scattering vertex x with clearance c, in a medium that scatters
+// isotropically, the walk until it first leaves a ball B(x, R) with R <= c - kHopMargin mean free paths is
+// replaced by one walk drawn from the tables of hops.hpp: its exit (a point on the sphere, a direction, a
+// path length L and n inner collisions), with time tau += ior L and weight exp(-sigma_a L) per channel
+// (times the ratio of the channels' scattering densities, (sigma_s,c / sigma_s,h)^n exp(-(sigma_s,c -
+// sigma_s,h) L), where sigma_s is chromatic and the walk was drawn for channel h). The next-event estimates
+// of the skipped events are made at one of them, z_J, which stands for all: the table's factor makes
+// factor * estimate(z_J) unbiased for their sum. Light that the exit flight meets directly is the last
+// skipped event's, weighed by MIS from there (the table holds how far back it lies). R is the largest table
+// radius that fits, if its mean saves at least kHopMinSaving collisions.
 constexpr double kHopMinSaving = 4.0;
+// Mean free paths (of the thinnest channel) kept between a hop's ball and every surface, so that the
+// skipped events' shadow rays cross some medium and z_J's estimate stays bounded.
+constexpr double kHopMargin = 1.0;
 // In a chromatic medium the log of a channel's weight after a hop of n collisions spreads by about
 // n delta^2 (delta the channels' relative spread in sigma_s); tables whose mean n delta^2 exceeds this are
 // not used.
@@ -57,24 +57,24 @@ constexpr double kHopClearanceReach = 64.0;
 // Whether the medium of a vertex allows hops, and the constants a hop needs.
 struct HopMedium {
   bool on = false;
-  double sigma_t_min = 0.0;  // the thinnest channel's extinction: the bound of the skipped estimates
+  double sigma_t_min = 0.0;  // the thinnest channel's extinction
   double delta2 = 0.0;       // largest (sigma_s,c / sigma_s,min - 1)^2
   double useful = 0.0;       // the least clearance at which a hop can save kHopMinSaving collisions
 };
 
 HopMedium hop_medium(const CompiledScene& cs, const RenderSettings& st, int medium) {
   HopMedium h;
-  if (!st.path_hops || st.max_depth >= 0 || !cs.lights_beyond_surfaces() || !cs.scattering(medium)) return h;
+  if (!st.path_hops || st.max_depth >= 0 || !cs.scattering(medium)) return h;
   const Medium& m = cs.scene().media[medium];
   const double smin = min_component(m.sigma_s), smax = max_component(m.sigma_s);
   if (m.g != 0.0 || !(smin > 0)) return h;
   h.on = true;
   h.sigma_t_min = min_component(m.sigma_t());
   h.delta2 = (smax / smin - 1.0) * (smax / smin - 1.0);
-  // The smallest table with a mean above kHopMinSaving, behind a margin where q = 1/e.
+  // The smallest table with a mean above kHopMinSaving, behind the margin.
   int k = 0;
   while (k + 1 < kHopTables && hop_mean_scatterings(k) < kHopMinSaving) ++k;
-  h.useful = (std::log(1.0 / kNeeBound) + 1.0) / h.sigma_t_min + hop_radius(k) / smax;
+  h.useful = kHopMargin / h.sigma_t_min + hop_radius(k) / smax;
   return h;
 }
 
@@ -185,10 +185,6 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
     }
     ++ts.path_vertices;
     const double g = v.surface ? 0.0 : scene.media[v.medium].g;
-    // Inside the ball of a hop not taken: the detailed branch, whose direct light counts 1/hop_keep.
-    const bool inner = !v.surface && v.hop_radius > 0 && length(v.position - v.hop_centre) < v.hop_radius;
-    if (!inner) v.hop_radius = 0.0;
-    const double inner_weight = inner ? 1.0 / v.hop_keep : 1.0;
     // 0. The vertex's clearance: how far it is from every surface (medium vertices only).
     double clearance = 0.0, nee_keep = 1.0;
     if (!v.surface) {
@@ -199,14 +195,13 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       const Vec3d sigma_t = scene.media[v.medium].sigma_t();
       const double from_centre = length(v.position - v.clear_centre);
       clearance = v.clear_radius > 0 ? v.clear_radius - from_centre : 0.0;
-      if (inner) clearance = std::max(clearance, v.hop_clear - length(v.position - v.hop_centre));
       const double thinnest = min_component(sigma_t);
       const double diameter = 2.0 * cs.sphere_radius();
       const double reach =
           thinnest > 0 ? std::min((hm.on ? kHopClearanceReach : kClearanceReach) / thinnest, diameter) : diameter;
       // Asked again where a hop might fit: the nearest surface may be as far as clear_radius + |p - q| when
       // the last query found one, and the walk has moved two mean free paths since.
-      const bool hop_worth_asking = hm.on && !inner && clearance < hm.useful &&
+      const bool hop_worth_asking = hm.on && clearance < hm.useful &&
                                     (v.clear_radius >= 0.999 * reach || v.clear_radius + from_centre >= hm.useful) &&
                                     from_centre * thinnest >= 2.0;
       if (clearance < kClearanceRequery / max_component(sigma_t) || hop_worth_asking) {
@@ -222,11 +217,9 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       if (clearance > 0 && cs.lights_beyond_surfaces())
         nee_keep = std::min(1.0, std::exp(-thinnest * clearance) / kNeeBound);
     }
-    // 1. Next-event estimation, kept with probability nee_prob (nee_keep, or nee_keep / hop_keep inside the
-    // ball of a hop not taken, which counts 1/hop_keep).
+    // 1. Next-event estimation (kept with probability nee_keep).
     LightConnection c;
-    const double nee_prob = std::min(1.0, nee_keep * inner_weight);
-    const bool nee = nee_prob >= 1.0 || rng.next_double() < nee_prob;
+    const bool nee = nee_keep >= 1.0 || rng.next_double() < nee_keep;
     if (nee && cs.connect_light(rng, v.position, v.medium, !v.surface, c)) {
       double f, pdf_scatter;
       if (v.surface) {
@@ -240,62 +233,71 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       }
       if (f > 0) {
         const double mis = c.pdf > 0 ? power_heuristic(c.pdf, pdf_scatter) : 1.0;
-        Vec3d value = v.weight * c.value * (f * mis * inner_weight / nee_prob);
+        Vec3d value = v.weight * c.value * (f * mis / nee_keep);
         if (v.surface) value = value * v.albedo;
         splat.add(v.tau + c.tau - unwarp, value, c.timeless, T);
         ++ts.path_connections;
       }
     }
     // 2. A hop across the vertex's surface-free ball, or the next direction (weight f/pdf is 1 for HG and the
-    // albedo for Lambert). `direct` weighs the light that the coming flight meets directly: 1, 1/hop_keep from
-    // inside the ball of a hop not taken, 0 after a hop.
-    Vec3d dir, pos = v.position;
-    double pdf_dir = 0.0, tau = v.tau, direct = inner_weight, start_clearance = clearance;
+    // albedo for Lambert). `origin` is where the coming flight started: after a hop, the last skipped event.
+    Vec3d dir, pos = v.position, origin = v.position;
+    double pdf_dir = 0.0, tau = v.tau, start_clearance = clearance;
     Vec3d weight = v.weight;
     int interactions = v.interactions;
     bool hopped = false;
-    if (hm.on && !inner && clearance >= hm.useful) {
+    if (hm.on && clearance >= hm.useful) {
       const Medium& m = scene.media[v.medium];
       const int h = pick_channel(channel_probabilities(weight), rng.next_double());
-      const double sh = m.sigma_s[h];
+      const double sh = m.sigma_s[h], scale = 1.0 / sh;
       int best = -1;
-      double best_saving = kHopMinSaving, best_keep = 1.0;
       for (int k = 0; k < kHopTables; ++k) {
-        const double margin = clearance - hop_radius(k) / sh;
         const double mean = hop_mean_scatterings(k);
-        if (margin <= 0 || mean * hm.delta2 > kHopChromaticSpread) break;
-        const double keep = std::min(1.0, std::exp(-hm.sigma_t_min * margin) / kNeeBound);
-        if ((1.0 - keep) * mean > best_saving) {
-          best = k;
-          best_saving = (1.0 - keep) * mean;
-          best_keep = keep;
-        }
+        if (clearance - hop_radius(k) * scale < kHopMargin / hm.sigma_t_min || mean * hm.delta2 > kHopChromaticSpread)
+          break;
+        if (mean >= kHopMinSaving) best = k;
       }
       if (best >= 0) {
-        const double radius = hop_radius(best) / sh;
-        if (rng.next_double() < best_keep) {
-          v.hop_centre = v.position;
-          v.hop_radius = radius;
-          v.hop_keep = best_keep;
-          v.hop_clear = clearance;
-          direct = 1.0 / best_keep;
-        } else {
-          const HopExit e = sample_hop(best, rng.next_double());
-          const Vec3d normal = sample_uniform_sphere(rng.next_double(), rng.next_double());
-          pos = v.position + normal * radius;
-          dir = from_frame(normal, e.cosine, 2.0 * kPi * rng.next_double());
-          const double L = e.length / sh;
-          const double n = e.scatterings;
+        // The channels' weights over a stretch of the walk with n collisions and length L.
+        auto stretch = [&](double n, double L) {
+          Vec3d f;
           for (int ch = 0; ch < 3; ++ch)
-            weight[ch] *= std::exp(n * std::log(m.sigma_s[ch] / sh) - (m.sigma_s[ch] - sh) * L - m.sigma_a[ch] * L);
-          tau += m.ior * L;
-          interactions += static_cast<int>(std::min<std::uint32_t>(e.scatterings, 1u << 30));
-          start_clearance = v.clear_radius - length(pos - v.clear_centre);
-          direct = 0.0;
-          hopped = true;
-          ++ts.path_hops;
-          ts.path_hop_scatterings += e.scatterings;
+            f[ch] = std::exp(n * std::log(m.sigma_s[ch] * scale) - (m.sigma_s[ch] - sh) * L - m.sigma_a[ch] * L);
+          return f;
+        };
+        const HopExit& e = sample_hop(best, rng.next_double());
+        const Vec3d normal = sample_uniform_sphere(rng.next_double(), rng.next_double());
+        Vec3d e1, e2;
+        hop_frame(normal, 2.0 * kPi * rng.next_double(), e1, e2);
+        // The skipped events' next-event estimates, made at z_J, kept like any vertex's by its clearance.
+        if (e.scatterings > 0) {
+          const Vec3d z = v.position + (e1 * e.vertex[0] + e2 * e.vertex[1] + normal * e.vertex[2]) * scale;
+          const double to_z = e.vertex_length * scale;
+          double keep = 1.0;
+          if (cs.lights_beyond_surfaces())
+            keep =
+                std::min(1.0, e.factor * std::exp(-hm.sigma_t_min * (clearance - length(z - v.position))) / kNeeBound);
+          LightConnection cz;
+          if ((keep >= 1.0 || rng.next_double() < keep) && cs.connect_light(rng, z, v.medium, true, cz)) {
+            const double mis = cz.pdf > 0 ? power_heuristic(cz.pdf, kInvFourPi) : 1.0;
+            const Vec3d value =
+                weight * stretch(e.vertex_scatterings, to_z) * cz.value * (kInvFourPi * mis * e.factor / keep);
+            splat.add(v.tau + m.ior * to_z + cz.tau - unwarp, value, cz.timeless, T);
+            ++ts.path_connections;
+          }
         }
+        const double L = e.length * scale;
+        pos = v.position + normal * (hop_radius(best) * scale);
+        dir = normal * e.cosine + e1 * std::sqrt(std::max(0.0, 1.0 - double(e.cosine) * e.cosine));
+        origin = pos - dir * (e.last * scale);
+        pdf_dir = kInvFourPi;
+        weight = weight * stretch(e.scatterings, L);
+        tau += m.ior * L;
+        interactions += static_cast<int>(std::min<std::uint32_t>(e.scatterings, 1u << 30));
+        start_clearance = v.clear_radius - length(pos - v.clear_centre);
+        hopped = true;
+        ++ts.path_hops;
+        ts.path_hop_scatterings += e.scatterings;
       }
     }
     if (!hopped) {
@@ -315,7 +317,6 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       weight = weight / q;
     }
     // 3. Along dir through boundaries to the next vertex, an emitter or the sky.
-    const Vec3d origin = pos;
     int medium = v.medium;
     bool null_chain = true;  // only index-matched crossings since the vertex: NEE could make this path
     bool next = false;
@@ -333,9 +334,8 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
         if (clear || s < dist) {
           const Vec3d tr = transmittance(sigma_t, s);
           weight = weight * (m.sigma_s * tr) / pdf_mixture(sigma_t, tr, prob);
-          const Vec3d clear_centre = v.clear_centre, hop_centre = v.hop_centre;
+          const Vec3d clear_centre = v.clear_centre;
           const double clear_radius = clear ? v.clear_radius : 0.0;
-          const double hop_radius = v.hop_radius, hop_keep = v.hop_keep, hop_clear = v.hop_clear;
           v = PathVertex{};
           v.position = pos + dir * s;
           v.incoming = dir;
@@ -345,10 +345,6 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
           v.interactions = interactions + 1;
           v.clear_centre = clear_centre;
           v.clear_radius = clear_radius;
-          v.hop_centre = hop_centre;
-          v.hop_radius = hop_radius;
-          v.hop_keep = hop_keep;
-          v.hop_clear = hop_clear;
           ts.path_clear_flights += clear ? 1 : 0;
           next = true;
           break;
@@ -360,9 +356,9 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
         weight = weight * transmittance(scene.media[medium].sigma_t(), dist);
       }
       if (!hit.valid) {
-        if (sky && within_depth(interactions) && direct > 0) {
+        if (sky && within_depth(interactions)) {
           const double mis = null_chain ? power_heuristic(pdf_dir, cs.sky_light_pdf(dir)) : 1.0;
-          splat.add(0.0, weight * scene.environment_radiance * (mis * direct), true, T);
+          splat.add(0.0, weight * scene.environment_radiance * mis, true, T);
         }
         return;
       }
@@ -370,11 +366,11 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
       tau += cs.ior(medium) * dist;
       pos = hit.position;
       const Shape& shape = scene.shapes[hit.shape];
-      if (shape.is_emitter() && hit.entering && within_depth(interactions) && direct > 0) {
+      if (shape.is_emitter() && hit.entering && within_depth(interactions)) {
         double mis = 1.0;
         if (null_chain)
           mis = power_heuristic(pdf_dir, cs.area_light_pdf(hit.shape, length(pos - origin), -dot(dir, hit.normal)));
-        splat.add(tau - unwarp, weight * shape.radiance * (mis * direct), false, T);
+        splat.add(tau - unwarp, weight * shape.radiance * mis, false, T);
       }
       const Vec3d facing = hit.entering ? hit.normal : -hit.normal;
       if (shape.kind == SurfaceKind::Null) {

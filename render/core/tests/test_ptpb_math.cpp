@@ -203,7 +203,7 @@ TEST_CASE("hop tables: composed exits match single-flight walks, large balls mat
   const double R = hop_radius(k);
   CHECK_NEAR(R, 8.0, 1e-12);
   const int n = 40000;
-  double sl = 0, sl2 = 0, sc = 0, sn = 0;
+  double sl = 0, sl2 = 0, sc = 0, sn = 0, slast = 0, sr2 = 0, spath = 0;
   for (int i = 0; i < n; ++i) {
     KeyedRng rng(3, 0, StreamDomain::Test, i);
     Vec3d p{};
@@ -217,29 +217,43 @@ TEST_CASE("hop tables: composed exits match single-flight walks, large balls mat
       if (s >= exit) {
         travelled += exit;
         sc += dot(d, p + d * exit) / R;
+        slast += exit;
         break;
       }
       p = p + d * s;
       travelled += s;
       ++inner;
+      sr2 += dot(p, p);  // sums over the inner events that the sampled event must stand for
+      spath += travelled;
       d = sample_uniform_sphere(rng.next_double(), rng.next_double());
     }
     sl += travelled;
     sl2 += travelled * travelled;
     sn += inner;
   }
-  double tl = 0, tc = 0, tn = 0;
+  double tl = 0, tc = 0, tn = 0, tlast = 0, tcount = 0, tr2 = 0, tpath = 0;
   for (int i = 0; i < kHopSamples; ++i) {
-    const HopExit e = sample_hop(k, (i + 0.5) / kHopSamples);
+    const HopExit& e = sample_hop(k, (i + 0.5) / kHopSamples);
     tl += e.length;
     tc += e.cosine;
     tn += e.scatterings;
+    tlast += e.last;
+    tcount += e.factor;
+    tr2 += e.factor * (e.vertex[0] * e.vertex[0] + e.vertex[1] * e.vertex[1] + e.vertex[2] * e.vertex[2]);
+    tpath += e.factor * e.vertex_length;
+    CHECK(e.vertex_scatterings <= e.scatterings && e.vertex_length <= e.length && e.last <= e.length);
   }
   const double mean = sl / n, sd = std::sqrt(sl2 / n - mean * mean);
   const double se = sd * std::sqrt(1.0 / n + 1.0 / kHopSamples);
   CHECK_NEAR(tl / kHopSamples, mean, 4 * se);
   CHECK_NEAR(tn / kHopSamples, sn / n, 4 * se);  // one scattering per unit length, within the same noise
   CHECK_NEAR(tc / kHopSamples, sc / n, 0.01);
+  CHECK_NEAR(tlast / kHopSamples, slast / n, 0.02);
+  // The sampled inner event times its factor stands for the sum over all inner events: their count, the sum
+  // of their squared distances from the centre and of their path lengths (within a few per cent of noise).
+  CHECK_NEAR(tcount / kHopSamples / (sn / n), 1.0, 0.02);
+  CHECK_NEAR(tr2 / kHopSamples / (sr2 / n), 1.0, 0.03);
+  CHECK_NEAR(tpath / kHopSamples / (spath / n), 1.0, 0.03);
   CHECK_NEAR(hop_mean_scatterings(k), tn / kHopSamples, 1e-9);
   // Diffusion with the extrapolated boundary R_e = R + 0.7104 (Milne): mean track length from a point source at
   // the centre = 3 (R^2/2 - R^3/(3 R_e)); exact only as R grows, so within 3 % at the largest table.

@@ -61,7 +61,7 @@ struct TileStats {
   std::uint64_t specular_pairs = 0;
   std::uint64_t surface_queries = 0, surface_pairs = 0;
   std::uint64_t path_vertices = 0, path_connections = 0, path_clearance_queries = 0, path_clear_flights = 0;
-  std::uint64_t path_splits = 0;  // copies made by splitting in time (§12)
+  std::uint64_t path_splits = 0;                          // copies made by splitting in time (§12)
   std::uint64_t path_hops = 0, path_hop_scatterings = 0;  // hops taken and the collisions they stood for (§12)
 
   // Integer totals: the order in which tiles add them does not matter.

@@ -1,36 +1,50 @@
 // Shell transport for path tracing deep in dense media (DESIGN.md §12, "Hops"): the exit laws of a
 // scattering-only random walk with isotropic scattering that starts with a scattering event at the
 // centre of a ball. In units of the scattering length the walk is scale-free, so one table per radius
-// serves every medium. Each table is a large sample of exits (path length, scatterings, exit cosine),
-// built once per process on first use from a fixed key, and therefore the same in every run.
+// serves every medium. Each table is a large sample of walks, each reduced to its exit and to one of its
+// inner scattering events, built once per process on first use from a fixed key, and therefore the same
+// in every run.
 #pragma once
 #include <cstdint>
+
+#include "ptpb/vec.hpp"
 
 namespace ptpb {
 
 // Radii R_k = 2 * 2^(k/2) scattering lengths, k = 0 .. kHopTables - 1 (2 to about 45).
 constexpr int kHopTables = 10;
-// Exits held per table: the tables' own sampling error of the mean path length is about 0.6/sqrt(N).
-constexpr int kHopSamples = 1 << 18;
+// Walks held per table: the tables' own sampling error of the mean path length is about 0.7/sqrt(N).
+constexpr int kHopSamples = 1 << 17;
 
 double hop_radius(int k);
 
-// One exit of the walk from a ball of radius R_k: the path length to the crossing of the sphere (in
-// scattering lengths), the number of scattering events strictly inside (the one at the centre not
-// counted), and the cosine between the exit direction and the outward normal at the exit point. By the
-// walk's rotational symmetry the exit point is uniform on the sphere and independent of these, and the
-// exit direction's azimuth about the normal is uniform: a sampler draws both itself.
+// One walk from the centre of a ball of radius R_k, in scattering lengths, as seen from its exit. The
+// exit frame has e3 along the outward normal at the exit point and e1 such that the exit direction is
+// cosine e3 + sqrt(1 - cosine^2) e1 (e2 = e3 x e1). By the walk's rotational symmetry that frame is
+// uniformly oriented and independent of everything held here, so a sampler draws it itself.
 struct HopExit {
-  float length = 0.0f;
-  float cosine = 0.0f;
-  std::uint32_t scatterings = 0;
+  float length = 0.0f;            // path length to the crossing of the sphere
+  float cosine = 0.0f;            // between the exit direction and the outward normal
+  std::uint32_t scatterings = 0;  // inner scattering events (the one at the centre not counted)
+  float last = 0.0f;              // path length from the last inner event (or the centre) to the crossing
+  // One inner event J, picked with probability proportional to w_i = exp(|z_i| - R) (the bound on what a
+  // next-event estimate from z_i can carry, up to a common factor), and factor = sum_i w_i / w_J: then
+  // factor * g(z_J) is an unbiased estimate of sum_i g(z_i) over the walk's inner events, for any g.
+  // factor is 0 for a walk without inner events.
+  float factor = 0.0f;
+  float vertex_length = 0.0f;            // path length from the centre to z_J
+  std::uint32_t vertex_scatterings = 0;  // scattering events up to and including z_J, the centre not counted
+  float vertex[3] = {0.0f, 0.0f, 0.0f};  // z_J in the exit frame
 };
 
-// The exit held at position floor(u * kHopSamples) of table k (u in [0, 1)), building the table (and
-// the smaller ones it is composed from) on first use; safe to call from several threads.
-HopExit sample_hop(int k, double u);
+// The walk held at position floor(u * kHopSamples) of table k (u in [0, 1)), building the table (and the
+// smaller ones it is composed from) on first use; safe to call from several threads.
+const HopExit& sample_hop(int k, double u);
 
 // The mean number of inner scatterings of table k: what a hop saves.
 double hop_mean_scatterings(int k);
+
+// The exit frame (e1, e2, e3) for an outward normal e3 and an azimuth phi of the exit direction about it.
+void hop_frame(const Vec3d& normal, double phi, Vec3d& e1, Vec3d& e2);
 
 }  // namespace ptpb

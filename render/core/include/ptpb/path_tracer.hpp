@@ -24,11 +24,6 @@ struct PathVertex {
   // the vertex; its clearance is clear_radius - |position - clear_centre| (§12).
   Vec3d clear_centre{};
   double clear_radius = 0.0;
-  // Shell transport (§12, "Hops"): a vertex inside the ball (hop_centre, hop_radius) belongs to the detailed
-  // walk of a hop that was not taken, kept with probability hop_keep; its next-event estimates and the light
-  // its flights find directly count 1/hop_keep. hop_clear is the clearance at hop_centre (0: no such ball).
-  Vec3d hop_centre{};
-  double hop_radius = 0.0, hop_keep = 1.0, hop_clear = 0.0;
 };
 
 // Traces the rest of the camera path from `start` with the pixel's stream `rng` and splats every

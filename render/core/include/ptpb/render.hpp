@@ -40,7 +40,7 @@ struct RenderStats {
   // made and free flights that ended inside a clearance sphere (no ray traced), and how many media
   // used paths in the last iteration.
   std::uint64_t path_vertices = 0, path_connections = 0, path_clearance_queries = 0, path_clear_flights = 0;
-  std::uint64_t path_splits = 0;  // copies made by splitting in time (§12)
+  std::uint64_t path_splits = 0;                          // copies made by splitting in time (§12)
   std::uint64_t path_hops = 0, path_hop_scatterings = 0;  // hops taken and the collisions they stood for (§12)
   int path_media = 0;
   // Delta lights behind dielectrics (§12): specular-delta beams stored, pairs accepted, and the largest

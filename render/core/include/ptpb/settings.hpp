@@ -51,7 +51,7 @@ struct RenderSettings {
   // Shell transport (§12, "Hops"): deep in an isotropically scattering medium a path-traced walk crosses a
   // surface-free ball in one step drawn from tabulated exit laws, its time and absorption exact.
   bool path_hops = true;
-  int max_depth = -1;   // Mitsuba meaning; -1 unbounded
+  int max_depth = -1;  // Mitsuba meaning; -1 unbounded
   int rr_depth = 5;
   std::uint64_t seed = 0;
   int threads = 0;  // 0: all hardware threads
