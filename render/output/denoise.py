@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.atomic import atomic_path
+from render.output.files import frame_windows
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,13 @@ def denoise_film(
     frames: np.ndarray, guides: Guides, path: Path, quality: str = "high", progress: bool = True
 ) -> DenoisedFilm:
     """Denoise a (T, H, W, 3) stack (in memory or memory-mapped) frame by frame into ``path`` (.npy), written to a
-    temporary file and renamed when complete, measuring the frames as they pass."""
+    temporary file and renamed when complete, measuring the frames as they pass.
+
+    The film is read a window at a time (``files.frame_windows``, which drops a memory-mapped film's pages after
+    each window) and the denoised frames are appended to the file as they are made, so the pass holds a window
+    and a few frames, not the film: pages of a memory-mapped input, and of a memory-mapped output written in
+    place, stay in the process's resident size until unmapped, and a full 1080p video's 6 GB film counted
+    twice that way (render/output/LOOK.md, "Memory")."""
     from tqdm import tqdm
 
     path = Path(path)
@@ -70,19 +77,29 @@ def denoise_film(
             f"frames are {frames.shape[2]}x{frames.shape[1]} pixels but the scene's camera is "
             f"{guides.albedo.shape[1]}x{guides.albedo.shape[0]}; run the scene and render stages again"
         )
+    shape = tuple(int(n) for n in frames.shape)
+    # The header np.save and np.lib.format.open_memmap write for this dtype and shape (format 1.0), so the
+    # file's bytes are theirs.
+    header = {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)), "fortran_order": False, "shape": shape}
     raw_flicker, denoised_flicker, largest_change = TemporalRoughness(), TemporalRoughness(), 0.0
-    with atomic_path(path) as temporary:
-        out = np.lib.format.open_memmap(temporary, mode="w+", dtype=np.float32, shape=frames.shape)
-        for k in tqdm(range(frames.shape[0]), desc="denoise", unit="frame", disable=not progress, leave=False):
-            frame = np.asarray(frames[k], np.float32)
-            out[k] = denoised = denoise_frame(frame, guides, quality)
-            raw_sum = float(np.sum(frame, dtype=np.float64))
-            if raw_sum > 0:
-                largest_change = max(largest_change, abs(float(np.sum(denoised, dtype=np.float64)) / raw_sum - 1.0))
-            raw_flicker.add(frame)
-            denoised_flicker.add(denoised)
-        out.flush()
-        del out
+    with (
+        atomic_path(path) as temporary,
+        open(temporary, "wb") as out,
+        tqdm(total=shape[0], desc="denoise", unit="frame", disable=not progress, leave=False) as bar,
+    ):
+        np.lib.format.write_array_header_1_0(out, header)
+        for _, window in frame_windows(frames):
+            for frame in window:
+                frame = np.asarray(frame, np.float32)
+                denoised = denoise_frame(frame, guides, quality)
+                out.write(denoised.data)
+                raw_sum = float(np.sum(frame, dtype=np.float64))
+                if raw_sum > 0:
+                    change = abs(float(np.sum(denoised, dtype=np.float64)) / raw_sum - 1.0)
+                    largest_change = max(largest_change, change)
+                raw_flicker.add(frame)
+                denoised_flicker.add(denoised)
+                bar.update()
     return DenoisedFilm(np.load(path, mmap_mode="r"), largest_change, raw_flicker.value, denoised_flicker.value)
 
 
