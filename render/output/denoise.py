@@ -36,15 +36,15 @@ def denoise_frame(frame: np.ndarray, guides: Guides, quality: str = "high") -> n
     if not np.any(frame):
         return np.zeros_like(frame, dtype=np.float32)
     color = np.ascontiguousarray(np.maximum(frame, 0.0), np.float32)
-    out = np.maximum(
-        np.asarray(
-            pyoidn.denoise(color, guides.albedo, guides.normal, hdr=True, clean_aux=True, quality=quality), np.float64
-        ),
-        0.0,
-    )
+    denoised = pyoidn.denoise(color, guides.albedo, guides.normal, hdr=True, clean_aux=True, quality=quality)
+    # One float64 copy of the network's output, clipped and scaled in place: a 1080p frame is 50 MB in float64,
+    # and each whole-frame temporary would be another.
+    out = np.array(denoised, np.float64)
+    np.maximum(out, 0.0, out=out)
     raw_sum, out_sum = np.asarray(frame, np.float64).sum(axis=(0, 1)), out.sum(axis=(0, 1))
     scale = np.divide(raw_sum, out_sum, out=np.ones(3), where=out_sum > 0)
-    return (out * np.maximum(scale, 0.0)).astype(np.float32)
+    out *= np.maximum(scale, 0.0)
+    return out.astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -125,14 +125,27 @@ class TemporalRoughness:
 
     def __init__(self) -> None:
         self.rough, self.total = 0.0, 0.0
-        self.recent: list[np.ndarray] = []  # the two frames before the next one
+        self.recent: list[np.ndarray] = []  # the two frames before the next one, in their own precision
+        self._work: np.ndarray | None = None  # one float64 frame that every sum is taken over
 
     def add(self, frame: np.ndarray) -> None:
-        frame = np.asarray(frame, np.float64)
-        self.total += float(np.abs(frame).sum())
+        # The sums run over a C-ordered float64 frame, and the second difference is computed in float64 with
+        # the same operations in the same order, in place: the values are those of converting every frame to
+        # float64 first (converting float32 is exact), with one float64 frame held instead of three and the
+        # temporaries of the expression.
+        frame = np.asarray(frame)
+        if self._work is None or self._work.shape != frame.shape:
+            self._work = np.empty(frame.shape, np.float64)
+        work = self._work
+        np.abs(frame, out=work)
+        self.total += float(work.sum())
         if len(self.recent) == 2:
-            self.rough += float(np.abs(frame - 2.0 * self.recent[1] + self.recent[0]).sum())
-        self.recent = [*self.recent[-1:], frame]
+            np.multiply(self.recent[1], 2.0, out=work, dtype=np.float64)
+            np.subtract(frame, work, out=work, dtype=np.float64)
+            np.add(work, self.recent[0], out=work, dtype=np.float64)
+            np.abs(work, out=work)
+            self.rough += float(work.sum())
+        self.recent = [*self.recent[-1:], np.array(frame)]
 
     @property
     def value(self) -> float:
