@@ -1,8 +1,11 @@
 """Issue 32's acceptance figures for the composite of a render folder: the stage's time and own peak memory
 (pipeline/memory.py), and the clip exposure from the histogram against the old sort of every sampled pixel.
+With ``--denoise`` the film is denoised first (``composite.denoise_quality``), as the stage does with
+``composite.denoise``, and the denoised frames are composited; the denoising pass is timed and measured apart.
 
     python benchmarks/bench_composite.py runs/video/render configs/assets/video.yaml
     python benchmarks/bench_composite.py --synthetic 24x1080x1920 configs/assets/video.yaml
+    python benchmarks/bench_composite.py --denoise --synthetic 48x1080x1920 configs/assets/video.yaml
 
 The sort is the old computation (issue 32: a float64 luminance of every sampled pixel), so this script,
 unlike the stage, needs memory in proportion to the sampled frames (about 1 GiB a 64-frame sample at 1080p).
@@ -20,6 +23,7 @@ import numpy as np
 from pipeline.config import load_config
 from pipeline.memory import PeakMemory
 from render.output.composite import FilmStatistics, clip_stride, composite_film
+from render.output.denoise import Guides, denoise_film
 from render.output.files import FrameAxis, RenderOutputs
 from render.output.tonemap import PERCENTILE_RELATIVE_ERROR, luminance
 
@@ -35,11 +39,24 @@ def synthetic_film(spec: str, folder: Path) -> tuple[np.ndarray, FrameAxis]:
     return np.load(folder / "frames.npy", mmap_mode="r"), FrameAxis(0.0, 0.003, "bins", count)
 
 
+def flat_guides(height: int, width: int) -> Guides:
+    """Guides for a synthetic film: a uniform snow albedo and every normal facing up."""
+    normal = np.zeros((height, width, 3), np.float32)
+    normal[..., 2] = 1.0
+    return Guides(np.full((height, width, 3), 0.8, np.float32), normal)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("source", help="a render stage folder, or TxHxW with --synthetic")
     parser.add_argument("config", type=Path, help="the run's config (its composite section)")
     parser.add_argument("--synthetic", action="store_true")
+    parser.add_argument(
+        "--denoise",
+        action="store_true",
+        help="denoise the film first and composite the denoised frames; a render folder's guides come from the "
+        "scene folder beside it",
+    )
     args = parser.parse_args()
     cfg = load_config(args.config).composite
     with tempfile.TemporaryDirectory() as scratch:
@@ -50,6 +67,22 @@ def main() -> None:
             outputs = RenderOutputs.read(args.source)
             frames, film, steady = outputs.frames(memory_mapped=True), outputs.axis, outputs.steady()
         out = Path(scratch) / "composite"
+        if args.denoise:
+            if args.synthetic:
+                guides = flat_guides(*frames.shape[1:3])
+            else:
+                from render.scene.guides import guide_buffers
+
+                guides = guide_buffers(Path(args.source).parent / "scene")
+            t0 = time.perf_counter()
+            with PeakMemory() as memory:
+                denoised = denoise_film(frames, guides, out / "frames_denoised.npy", cfg.denoise_quality, False)
+            seconds = time.perf_counter() - t0
+            print(
+                f"denoise ({cfg.denoise_quality}, {frames.nbytes / 2**30:.2f} GiB film): {seconds:.1f} s, "
+                f"peak {memory.peak_mib:.0f} MiB, {memory.added_mib:.0f} MiB above its start"
+            )
+            frames = denoised.frames
         t0 = time.perf_counter()
         with PeakMemory() as memory:
             composite_film(frames, film, cfg, out, streaks=True, steady=steady, exr_attributes={})
