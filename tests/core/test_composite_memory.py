@@ -21,19 +21,25 @@ LIMIT_MIB = 64  # what the film may add to the stage's fixed part
 FILM_MIB = 4 * LIMIT_MIB
 
 
-@pytest.mark.slow  # about a minute on 2 cores
-def test_a_memory_mapped_film_four_times_the_limit_composites_within_it(tmp_path, monkeypatch):
-    height, width = 192, 256
-    count = int(np.ceil(FILM_MIB * 2**20 / (height * width * 3 * 4)))
-    path = tmp_path / "frames.npy"
+def sweeping_pulse_film(path, height: int, width: int, mib: float) -> np.ndarray:
+    """A film of at least ``mib`` MiB written to ``path`` (.npy) and opened memory-mapped: a pulse sweeping over
+    a faint noisy floor, frame by frame."""
+    count = int(np.ceil(mib * 2**20 / (height * width * 3 * 4)))
     film = np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=(count, height, width, 3))
     rng = np.random.default_rng(0)
-    for k in range(count):  # a pulse sweeping over a faint noisy floor
+    for k in range(count):
         film[k] = 0.01 * rng.random((height, width, 3), dtype=np.float32)
         film[k, 40:56, k * width // count : k * width // count + 4] += 1.0
     film.flush()
     del film
-    frames = np.load(path, mmap_mode="r")
+    return np.load(path, mmap_mode="r")
+
+
+@pytest.mark.slow  # about a minute on 2 cores
+def test_a_memory_mapped_film_four_times_the_limit_composites_within_it(tmp_path, monkeypatch):
+    height, width = 192, 256
+    frames = sweeping_pulse_film(tmp_path / "frames.npy", height, width, FILM_MIB)
+    count = frames.shape[0]
     assert frames.nbytes >= 4 * LIMIT_MIB * 2**20
     # The stage's window is 64 MiB, sized for a 1080p film; a film of small frames takes one in proportion.
     monkeypatch.setattr(files, "WINDOW_BYTES", 4 * 2**20)

@@ -6,6 +6,8 @@ within it."""
 from __future__ import annotations
 
 import io
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +15,9 @@ import pytest
 from pipeline.memory import PeakMemory
 from render.output import files
 from render.output.denoise import Guides, TemporalRoughness, denoise_film
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_composite_memory import sweeping_pulse_film  # noqa: E402
 
 pyoidn = pytest.importorskip("pyoidn")
 
@@ -126,16 +131,7 @@ def test_a_memory_mapped_film_four_times_the_limit_denoises_within_it(tmp_path, 
     the resident size: a film twice over. Now a film four times the limit adds less than the limit to what a
     short film of the same frames needs."""
     height, width = 192, 256
-    count = int(np.ceil(FILM_MIB * 2**20 / (height * width * 3 * 4)))
-    path = tmp_path / "frames.npy"
-    film = np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=(count, height, width, 3))
-    rng = np.random.default_rng(0)
-    for k in range(count):  # a pulse sweeping over a faint noisy floor
-        film[k] = 0.01 * rng.random((height, width, 3), dtype=np.float32)
-        film[k, 40:56, k * width // count : k * width // count + 4] += 1.0
-    film.flush()
-    del film
-    frames = np.load(path, mmap_mode="r")
+    frames = sweeping_pulse_film(tmp_path / "frames.npy", height, width, FILM_MIB)
     assert frames.nbytes >= 4 * LIMIT_MIB * 2**20
     # The stage's window is 64 MiB, sized for a 1080p film; a film of small frames takes one in proportion.
     monkeypatch.setattr(files, "WINDOW_BYTES", 4 * 2**20)
