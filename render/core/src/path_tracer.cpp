@@ -205,11 +205,13 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
                                     (v.clear_radius >= 0.999 * reach || v.clear_radius + from_centre >= hm.useful) &&
                                     from_centre * thinnest >= 2.0;
       if (clearance < kClearanceRequery / max_component(sigma_t) || hop_worth_asking) {
-        // The last query found a surface at clear_radius from its centre, so none is farther than that plus
-        // the walk's displacement: a search bounded there visits fewer triangles and finds the same one.
+        // The last query found a surface at clear_radius from its centre (less the float margin that
+        // CompiledScene::clearance takes off), so none is farther than that plus the walk's displacement: a
+        // search bounded there, with room for both margins, visits fewer triangles and finds the same one.
         const bool bounded = v.clear_radius > 0 && v.clear_radius < 0.999 * reach;
-        clearance =
-            cs.clearance(v.position, bounded ? std::min(reach, 1.001 * (v.clear_radius + from_centre) + 1e-9) : reach);
+        const Vec3d& p = v.position;
+        const double slack = 1e-5 * (1.0 + std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)}));
+        clearance = cs.clearance(p, bounded ? std::min(reach, 1.001 * (v.clear_radius + from_centre) + slack) : reach);
         v.clear_centre = v.position;
         v.clear_radius = clearance;
         ++ts.path_clearance_queries;
