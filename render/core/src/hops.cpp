@@ -69,22 +69,21 @@ HopExit walk_in_ball(int k, KeyedRng& rng) {
     int j = k - 1;
     while (j >= 0 && hop_radius(j) > room) --j;
     if (j >= 0) {
-      const HopExit& e = table(j).exits[static_cast<std::size_t>(rng.next_double() * kHopSamples)];
-      const Vec3d normal = sample_uniform_sphere(rng.next_double(), rng.next_double());
-      Vec3d e1, e2;
-      hop_frame(normal, 2.0 * kPi * rng.next_double(), e1, e2);
-      const double rj = hop_radius(j);
+      const HopExit& e = sample_hop(j, rng.next_double());
+      const double u1 = rng.next_double(), u2 = rng.next_double(), u3 = rng.next_double();
+      const HopFrame frame(u1, u2, u3);
       if (e.scatterings > 0) {
-        const Vec3d z = pos + e1 * e.vertex[0] + e2 * e.vertex[1] + normal * e.vertex[2];
+        const Vec3d z = pos + frame.vertex(e);
         offer(e.factor * std::exp(length(z) - R), z, travelled + e.vertex_length, scatterings + e.vertex_scatterings);
         last_start = travelled + e.length - e.last;
       }
-      pos = pos + normal * rj;
-      dir = normal * e.cosine + e1 * std::sqrt(std::max(0.0, 1.0 - double(e.cosine) * e.cosine));
+      pos = pos + frame.normal * hop_radius(j);
+      dir = frame.direction(e);
       travelled += e.length;
       scatterings += e.scatterings;
     } else {
-      dir = sample_uniform_sphere(rng.next_double(), rng.next_double());
+      const double u1 = rng.next_double(), u2 = rng.next_double();
+      dir = sample_uniform_sphere(u1, u2);
     }
     const double s = -std::log1p(-rng.next_double());
     const double exit = to_sphere(pos, dir, R);
@@ -155,11 +154,19 @@ const HopExit& sample_hop(int k, double u) {
 
 double hop_mean_scatterings(int k) { return table(k).mean_scatterings; }
 
-void hop_frame(const Vec3d& normal, double phi, Vec3d& e1, Vec3d& e2) {
+HopFrame::HopFrame(double u1, double u2, double u3) : normal(sample_uniform_sphere(u1, u2)) {
   Vec3d s, t;
   make_frame(normal, s, t);
+  const double phi = 2.0 * kPi * u3;
   e1 = s * std::cos(phi) + t * std::sin(phi);
   e2 = cross(normal, e1);
 }
+
+Vec3d HopFrame::direction(const HopExit& e) const {
+  const double cosine = e.cosine;
+  return normal * cosine + e1 * std::sqrt(std::max(0.0, 1.0 - cosine * cosine));
+}
+
+Vec3d HopFrame::vertex(const HopExit& e) const { return e1 * e.vertex[0] + e2 * e.vertex[1] + normal * e.vertex[2]; }
 
 }  // namespace ptpb

@@ -268,12 +268,11 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
           return f;
         };
         const HopExit& e = sample_hop(best, rng.next_double());
-        const Vec3d normal = sample_uniform_sphere(rng.next_double(), rng.next_double());
-        Vec3d e1, e2;
-        hop_frame(normal, 2.0 * kPi * rng.next_double(), e1, e2);
+        const double u1 = rng.next_double(), u2 = rng.next_double(), u3 = rng.next_double();
+        const HopFrame frame(u1, u2, u3);
         // The skipped events' next-event estimates, made at z_J, kept like any vertex's by its clearance.
         if (e.scatterings > 0) {
-          const Vec3d z = v.position + (e1 * e.vertex[0] + e2 * e.vertex[1] + normal * e.vertex[2]) * scale;
+          const Vec3d z = v.position + frame.vertex(e) * scale;
           const double to_z = e.vertex_length * scale;
           double keep = 1.0;
           if (cs.lights_beyond_surfaces())
@@ -289,8 +288,8 @@ void walk(const CameraPass& p, const PixelSplat& splat, KeyedRng& rng, const Pat
           }
         }
         const double L = e.length * scale;
-        pos = v.position + normal * (hop_radius(best) * scale);
-        dir = normal * e.cosine + e1 * std::sqrt(std::max(0.0, 1.0 - double(e.cosine) * e.cosine));
+        pos = v.position + frame.normal * (hop_radius(best) * scale);
+        dir = frame.direction(e);
         origin = pos - dir * (e.last * scale);
         pdf_dir = kInvFourPi;
         weight = weight * stretch(e.scatterings, L);

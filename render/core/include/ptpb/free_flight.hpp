@@ -29,13 +29,14 @@ inline Vec3d channel_probabilities(const Vec3d& w) {
   const double sum = w.x + w.y + w.z;
   return sum > 0 ? w / sum : kUniformChannels;
 }
-// A channel picked with probabilities `prob`, then its exponential; infinite for a channel without
-// extinction (whose second draw is then not made).
+// The channel that a uniform u in [0, 1) picks with probabilities `prob`.
 inline int pick_channel(const Vec3d& prob, double u) {
   const int channel = u < prob.x ? 0 : (u < prob.x + prob.y ? 1 : 2);
   if (!(prob[channel] > 0)) return prob.y > 0 ? 1 : 0;  // rounding at the top of the unit interval
   return channel;
 }
+// A channel picked with probabilities `prob`, then its exponential; infinite for a channel without
+// extinction (whose second draw is then not made).
 inline double sample_free_flight(const Vec3d& sigma_t, const Vec3d& prob, KeyedRng& rng) {
   const int channel = pick_channel(prob, rng.next_double());
   if (!(sigma_t[channel] > 0)) return std::numeric_limits<double>::infinity();

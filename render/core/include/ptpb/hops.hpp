@@ -44,7 +44,15 @@ const HopExit& sample_hop(int k, double u);
 // The mean number of inner scatterings of table k: what a hop saves.
 double hop_mean_scatterings(int k);
 
-// The exit frame (e1, e2, e3) for an outward normal e3 and an azimuth phi of the exit direction about it.
-void hop_frame(const Vec3d& normal, double phi, Vec3d& e1, Vec3d& e2);
+// A uniformly oriented exit frame drawn from three uniform numbers in [0, 1): the outward normal at the exit
+// (e3) uniform on the sphere, and e1 at a uniform azimuth about it (e2 = e3 x e1). It places a table walk:
+// its exit point is normal * R, its exit direction and inner event z_J (relative to the centre, in the
+// table's units) are below.
+struct HopFrame {
+  Vec3d normal, e1, e2;
+  HopFrame(double u1, double u2, double u3);
+  Vec3d direction(const HopExit& e) const;
+  Vec3d vertex(const HopExit& e) const;
+};
 
 }  // namespace ptpb
