@@ -535,6 +535,8 @@ def _composite(
         if guides is None:
             raise ValueError("composite.denoise needs the scene's guide buffers (render.scene.guides.guide_buffers)")
         shown, denoised, delivered = *_denoise(frames, film, cfg, guides, out_dir, exr_attributes), "denoised"
+        if steady is not None:
+            steady = _denoise_still(steady, cfg, guides, out_dir, denoised)
     written, exposures = composite_film(
         shown,
         film,
@@ -581,6 +583,32 @@ def _composite(
         "exposures": exposures,
         **({"denoise": denoised} if denoised is not None else {}),
     }
+
+
+def _denoise_still(steady: np.ndarray, cfg, guides: Guides, out_dir: Path, denoised: dict) -> np.ndarray:
+    """The still (the steady image under the light in flight, and the poster's main image) denoised with the
+    frames' guides and kept at its raw sum, as each frame is (render/output/LOOK.md, *Denoised delivery*).
+    The raw still goes beside it as still_raw.png, at the denoised still's exposure so the two compare, and
+    the denoised steady image as steady_denoised.exr; the render's steady.exr stays raw."""
+    import time
+
+    from render.output import denoise
+    from render.output.exr import write_exr
+
+    start = time.perf_counter()
+    delivered = denoise.denoise_frame(steady, guides, cfg.denoise_quality)
+    denoised["still_seconds"] = time.perf_counter() - start
+    raw_sum = np.asarray(steady, np.float64).sum()
+    denoised["still_sum_change"] = float(abs(delivered.sum(dtype=np.float64) / raw_sum - 1)) if raw_sum > 0 else 0.0
+    files = denoised["files"]
+    files["still_raw"] = out_dir / "still_raw.png"
+    scale = exposure_scale(delivered, cfg.exposure_percentile)
+    with atomic_path(files["still_raw"]) as tmp:
+        Image.fromarray(np.round(display_values(steady, scale, cfg.tone_curve) * 255).astype(np.uint8)).save(tmp)
+    files["steady_denoised"] = write_exr(
+        out_dir / "steady_denoised.exr", delivered, attributes={"penitentes:frames": "denoised"}
+    )
+    return delivered
 
 
 def _denoise(

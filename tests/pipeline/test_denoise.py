@@ -13,11 +13,13 @@ import OpenImageIO as oiio
 import pytest
 import yaml
 from block_scene import block_config
+from PIL import Image
 
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
-from render.output.metrics import per_frame_relmse
+from render.output.exr import read_exr
+from render.output.metrics import per_frame_relmse, relmse
 from render.scene.guides import guide_buffers
 
 pytestmark = pytest.mark.mitsuba
@@ -47,7 +49,7 @@ def _run(tmp_path, name: str, iterations: int, seed: int, composite: dict | None
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     tmp_path = tmp_path_factory.mktemp("denoise")
-    noisy = _run(tmp_path, "noisy", 4, seed=5, composite={"denoise": True, "exr_frames": True})
+    noisy = _run(tmp_path, "noisy", 4, seed=5, composite={"denoise": True, "exr_frames": True, "light_in_flight": True})
     long = _run(tmp_path, "long", 64, seed=6)
     return noisy, long
 
@@ -103,6 +105,31 @@ def test_denoised_frames_keep_their_sums_and_approach_a_longer_render(runs):
     denoised_error = per_frame_relmse(delivered, reference)[held]
     assert held.sum() >= 4
     assert denoised_error.mean() < raw_error.mean() / 3, (denoised_error, raw_error)
+
+
+def test_the_still_is_denoised_and_keeps_its_sum(runs):
+    """With light in flight on, the still (the poster's main image) is the denoised steady image: it keeps the raw
+    steady image's sum per channel and comes closer to the 16x longer render's steady image than the raw one
+    does (measured 0.41 of its relMSE on this 48 x 32 film, where edges are a large share of the pixels); the raw still and the denoised EXR are written beside it, and the
+    render's steady image is untouched."""
+    noisy, long = runs
+    raw = np.load(noisy / "render" / "steady.npy")
+    reference = np.load(long / "render" / "steady.npy")
+    delivered = read_exr(noisy / "composite" / "steady_denoised.exr")
+    assert delivered.shape == raw.shape and np.all(np.isfinite(delivered)) and delivered.min() >= 0
+    np.testing.assert_allclose(delivered.sum(axis=(0, 1)), raw.sum(axis=(0, 1)), rtol=1e-4)
+    assert relmse(delivered, reference) < relmse(raw, reference) / 2, (
+        relmse(delivered, reference),
+        relmse(raw, reference),
+    )
+    image = oiio.ImageInput.open(str(noisy / "composite" / "steady_denoised.exr"))
+    assert image.spec().getattribute("penitentes:frames") == "denoised"
+    image.close()
+    for name in ("still.png", "still_raw.png"):
+        assert Image.open(noisy / "composite" / name).size == (raw.shape[1], raw.shape[0])
+    summary = json.loads((noisy / "composite" / "manifest.json").read_text())["summary"]
+    assert summary["denoise"]["still_sum_change"] < 1e-4
+    assert {"still_raw.png", "steady_denoised.exr"} <= set(summary["files"])
 
 
 def test_raw_frames_stay_raw_and_the_headers_say_which(runs):
