@@ -59,7 +59,8 @@ class CompositeConfig(StrictModel):
         description="Deliver denoised frames: Intel Open Image Denoise on each frame, guided by the first camera "
         "hit's albedo and normal, each frame keeping its raw sum (render/output/LOOK.md, *Denoised delivery*). The videos, streaks "
         "and light in flight show them; frames_denoised.npy and exr_denoised/ hold them beside the raw exr/, and "
-        "raw_denoised.mp4/.png set the two side by side. Comparisons, guards and tables always read the raw "
+        "raw_denoised.mp4/.png set the two side by side. With light_in_flight the still is denoised too (still.png; "
+        "still_raw.png and steady_denoised.exr beside it). Comparisons, guards and tables always read the raw "
         "frames [-].",
     )
     denoise_quality: Literal["high", "balanced", "fast"] = Field(
