@@ -39,6 +39,8 @@ SHARD_DONE = "shard.json"  # written last: a shard folder without it is incomple
 GIB = float(1 << 30)
 # Renders with fewer pixel-iterations than this skip the calibration (a few minutes on 2 cores at most).
 CALIBRATE_FROM_PIXEL_ITERATIONS = 2e7
+# Calibration probes a film larger than four times this on a camera shrunk to about this many pixels.
+PROBE_PIXELS = 1 << 17
 
 
 class SplitError(ValueError):
@@ -321,58 +323,109 @@ def merge_shards(
     )
 
 
+def probe_factors(width: int, height: int) -> tuple[int, ...]:
+    """The factors by which calibration shrinks the camera in each axis: (1,), the real size, for a film
+    of up to PROBE_PIXELS x 4 pixels; above it (k, 2k), k the smallest power of two that brings the film
+    down to PROBE_PIXELS or fewer."""
+    pixels = width * height
+    if pixels <= 4 * PROBE_PIXELS:
+        return (1,)
+    k = 2
+    while pixels / (k * k) > PROBE_PIXELS:
+        k *= 2
+    return (k, 2 * k)
+
+
+def shrunk(scene: Mapping[str, Any], k: int) -> dict:
+    """The scene with its camera k times coarser in each axis: the same field of view and pose, so a pixel
+    costs what it costs at the real size (the kernel radii are already in metres)."""
+    camera = scene["camera"]
+    size = {"width": max(1, round(camera["width"] / k)), "height": max(1, round(camera["height"] / k))}
+    return {**scene, "camera": {**camera, **size}}
+
+
 def calibrate(
     scene: dict, core_settings: dict, windows: Sequence[tuple[int, int]], shards: int = 1
 ) -> dict[str, Any] | None:
-    """Time two iterations of the first window at the real size and predict the whole render: wall time
-    and peak memory of one pass. None for a short render (below CALIBRATE_FROM_PIXEL_ITERATIONS) or a
-    time-budgeted one.
+    """Time two iterations of the first window and predict the whole render: wall time and peak memory of
+    one pass. None for a short render (below CALIBRATE_FROM_PIXEL_ITERATIONS) or a time-budgeted one.
 
     A pass costs a fixed part (the scene's structures, the film's buffers, the average at the end) and its
     iterations; the first iteration also has the widest kernels. Timing the iterations apart (a snapshot
     after each) gives the fixed part with the first iteration, the second iteration alone, and the finish:
     a pass is predicted as fixed + first + (iterations - 1) x second + finish, times the windows, split
     evenly over shards. One iteration's total times the iterations counted the fixed part and the first
-    iteration's kernels every time: 75 % high on the full video (issue 32)."""
+    iteration's kernels every time: 75 % high on the full video (issue 32).
+
+    A large film is not probed at its own size, which cost the full video 2.6 min and would cost the 4K
+    poster about 7 min of rendering thrown away. The camera is shrunk instead (``probe_factors``) and
+    probed at two sizes P1 > P2 pixels: an iteration costs a + b P, a part that does not depend on the
+    pixels (light paths, beams and their structure) and one that does (the camera paths), and the two
+    timings give both. The start-up is the larger probe's, with one iteration at the real size; the finish
+    (averaging the sums) scales with the pixels; the peak memory is the larger probe's with its image
+    buffers replaced by the real film's."""
     from pipeline.memory import PeakMemory
 
     iterations = int(core_settings.get("iterations", 0))
-    pixels = int(scene["camera"]["width"]) * int(scene["camera"]["height"])
+    width, height = int(scene["camera"]["width"]), int(scene["camera"]["height"])
+    pixels = width * height
     if core_settings.get("time_budget_s") or pixels * iterations < CALIBRATE_FROM_PIXEL_ITERATIONS:
         return None
     first, count = windows[0]
-    probe = with_window(scene, first, count) if count else scene
+    window = with_window(scene, first, count) if count else scene
     probe_iterations = min(2, iterations)
-    with PeakMemory() as memory:
-        out = render(
-            probe,
-            {**core_settings, "iterations": probe_iterations, "snapshot_every": 1, "checkpoint_every_iterations": 0},
-        )
-    timing = pass_timing(float(out.stats["time_total_s"]), list(out.snapshot_seconds))
-    del out
+    probes = []
+    for k in probe_factors(width, height):
+        probe = shrunk(window, k)
+        with PeakMemory() as memory:
+            out = render(
+                probe,
+                {
+                    **core_settings,
+                    "iterations": probe_iterations,
+                    "snapshot_every": 1,
+                    "checkpoint_every_iterations": 0,
+                },
+            )
+        timing = pass_timing(float(out.stats["time_total_s"]), list(out.snapshot_seconds))
+        probe_pixels = int(probe["camera"]["width"]) * int(probe["camera"]["height"])
+        probe_buffers = window_bytes(probe, core_settings, count) if count else 0.0
+        probes.append((probe_pixels, timing, memory.peak_mib * 2**20 - probe_buffers))
+        del out
+    (p1, timing, other_bytes), *rest = probes
+    if rest:
+        p2, t2, _ = rest[0]
+        slope = max(0.0, (timing["per_iteration_s"] - t2["per_iteration_s"]) / (p1 - p2))
+        fixed = max(0.0, timing["per_iteration_s"] - slope * p1)
+        per_iteration = fixed + slope * pixels
+        to_first = timing["to_first_s"] - timing["per_iteration_s"] + per_iteration
+        finish = timing["finish_s"] * pixels / p1
+    else:
+        per_iteration, to_first, finish = timing["per_iteration_s"], timing["to_first_s"], timing["finish_s"]
     passes = max(1, len([w for w in windows if w[1] > 0]))
-    per_pass = timing["to_first_s"] + timing["finish_s"] + (iterations - 1) * timing["per_iteration_s"]
+    per_pass = to_first + finish + (iterations - 1) * per_iteration
     wall = per_pass * passes
     per_shard = wall / max(1, shards)
-    per_iteration = timing["per_iteration_s"]
     buffers = window_bytes(scene, core_settings, max(c for _, c in windows)) if windows[0][1] else 0.0
+    peak = (other_bytes + buffers) / GIB
+    probed = f"{width}x{height}" if not rest else f"{width}x{height} shrunk to {p1} and {rest[0][0]} pixels"
     summary = (
-        f"calibration: {probe_iterations} iterations of {count or 'no'} frames at "
-        f"{scene['camera']['width']}x{scene['camera']['height']}: start-up and first iteration "
-        f"{timing['to_first_s']:.1f} s, then {per_iteration:.1f} s an iteration, {timing['finish_s']:.1f} s to finish; "
+        f"calibration: {probe_iterations} iterations of {count or 'no'} frames at {probed}: start-up and first "
+        f"iteration {to_first:.1f} s, then {per_iteration:.1f} s an iteration, {finish:.1f} s to finish; "
         f"predicted {wall / 60:.1f} min for {iterations} iterations x {passes} window(s)"
         + (f", {per_shard / 60:.1f} min per shard on {shards} shards" if shards > 1 else "")
-        + f", peak memory about {memory.peak_mib / 1024:.2f} GiB ({buffers / GIB:.2f} GiB of image buffers a pass)"
+        + f", peak memory about {peak:.2f} GiB ({buffers / GIB:.2f} GiB of image buffers a pass)"
     )
     return {
         "seconds_per_iteration": per_iteration,
-        "seconds_to_first_iteration": timing["to_first_s"],
-        "seconds_to_finish": timing["finish_s"],
+        "seconds_to_first_iteration": to_first,
+        "seconds_to_finish": finish,
         "predicted_wall_s": wall,
         "predicted_wall_s_per_shard": per_shard,
         "windows": passes,
-        "predicted_peak_gib": memory.peak_mib / 1024,
+        "predicted_peak_gib": peak,
         "image_buffers_gib": buffers / GIB,
+        "probe_pixels": [p for p, _, _ in probes],
         "summary": summary,
     }
 

@@ -147,25 +147,68 @@ def test_render_stage_windows_over_budget_and_merges_shards(scene_dir, tmp_path)
 def test_calibration_predicts_from_the_second_iteration_and_counts_the_start_up_once(monkeypatch):
     """Start-up and the first iteration take 15 s, each later one 2 s, the finish 3 s: 64 iterations in two
     windows take 2 x (15 + 63 x 2 + 3) = 288 s. One iteration's total times the iterations (the old
-    prediction) would say 2 x 64 x 18 = 2304 s."""
+    prediction) would say 2 x 64 x 18 = 2304 s. A film this small (640 x 360) is probed at its own size."""
     from render.ptpb import split
 
     class Timed:
         stats = {"time_total_s": 20.0}
         snapshot_seconds = [15.0, 17.0]
 
-    asked = {}
+    asked = []
 
     def fake_render(scene, settings, **kwargs):
-        asked.update(settings)
+        asked.append((dict(scene["camera"]), dict(settings)))
         return Timed()
 
     monkeypatch.setattr(split, "render", fake_render)
     monkeypatch.setattr(split, "window_bytes", lambda scene, settings, count: count * 1e6)
-    scene = {"camera": {"width": 1920, "height": 1080}, "film": {"temporal_bins": 240, "frame_mode": "bins"}}
-    plan = split.calibrate(scene, {"iterations": 64}, [(0, 120), (120, 120)])
-    assert (asked["iterations"], asked["snapshot_every"]) == (2, 1)
-    assert plan is not None and plan["predicted_wall_s"] == pytest.approx(2 * (15 + 63 * 2 + 3))
+    scene = {"camera": {"width": 640, "height": 360}, "film": {"temporal_bins": 240, "frame_mode": "bins"}}
+    plan = split.calibrate(scene, {"iterations": 256}, [(0, 120), (120, 120)])
+    assert [(c["width"], c["height"], s["iterations"], s["snapshot_every"]) for c, s in asked] == [(640, 360, 2, 1)]
+    assert plan is not None and plan["predicted_wall_s"] == pytest.approx(2 * (15 + 255 * 2 + 3))
     assert plan["seconds_per_iteration"] == pytest.approx(2.0) and plan["seconds_to_finish"] == pytest.approx(3.0)
     with pytest.raises(ValueError, match="snapshot after each iteration"):
         split.pass_timing(4.0, [])
+
+
+def test_calibration_of_a_large_film_probes_a_shrunk_camera_at_two_sizes(monkeypatch):
+    """A 1920 x 1080 film is probed at 480 x 270 and 240 x 135 with the same field of view. With a start-up of
+    10 s, an iteration of 0.5 s + 20 us a pixel and a finish of 1 us a pixel, the prediction is the real
+    size's: 2 windows x (10 + 64 iterations of 41.97 s + 2.07 s); the image buffers of the peak memory are
+    the real film's, not the probe's."""
+    from render.ptpb import split
+
+    asked = []
+
+    def fake_render(scene, settings, **kwargs):
+        camera = dict(scene["camera"])
+        asked.append(camera)
+        pixels = camera["width"] * camera["height"]
+        iteration = 0.5 + 2e-5 * pixels
+        film = np.ones((120, pixels, 3), np.float32)  # the probe's buffers, in the process's peak
+        del film
+
+        class Timed:
+            stats = {"time_total_s": 10.0 + 2 * iteration + 1e-6 * pixels}
+            snapshot_seconds = [10.0 + iteration, 10.0 + 2 * iteration]
+
+        return Timed()
+
+    monkeypatch.setattr(split, "render", fake_render)
+    monkeypatch.setattr(
+        split,
+        "window_bytes",
+        lambda scene, settings, count: count * 12.0 * scene["camera"]["width"] * scene["camera"]["height"],
+    )
+    camera = {"width": 1920, "height": 1080, "fov": 40.0, "fov_axis": "x"}
+    scene = {"camera": camera, "film": {"temporal_bins": 240, "frame_mode": "bins"}}
+    plan = split.calibrate(scene, {"iterations": 64}, [(0, 120), (120, 120)])
+    assert [(c["width"], c["height"], c["fov"]) for c in asked] == [(480, 270, 40.0), (240, 135, 40.0)]
+    full = 0.5 + 2e-5 * 1920 * 1080
+    assert plan is not None and plan["probe_pixels"] == [480 * 270, 240 * 135]
+    assert plan["seconds_per_iteration"] == pytest.approx(full)
+    assert plan["predicted_wall_s"] == pytest.approx(2 * (10 + 64 * full + 1e-6 * 1920 * 1080))
+    buffers = 120 * 12.0 * 1920 * 1080 / 2**30
+    assert plan["image_buffers_gib"] == pytest.approx(buffers)
+    assert buffers < plan["predicted_peak_gib"] < buffers + 4  # the process (Python, numpy) and the real buffers
+    assert split.probe_factors(3840, 2160) == (8, 16) and split.probe_factors(640, 360) == (1,)
