@@ -428,6 +428,18 @@ def light_in_flight(
     return composite_film(frames, film, cfg, out_dir, videos=False, steady=steady, metres_per_pixel=metres_per_pixel)[0]
 
 
+SIDE_BY_SIDE_PANEL_WIDTH = 1280  # px: three panels of a 4K film would make an 11520-wide clip few players open
+
+
+def panel_factor(height: int, width: int) -> int:
+    """The box factor that brings a side-by-side panel to SIDE_BY_SIDE_PANEL_WIDTH pixels or fewer: the
+    smallest that divides both sides (1 where none does, or none is needed)."""
+    for factor in range(1, width + 1):
+        if width % factor == 0 and height % factor == 0 and width // factor <= SIDE_BY_SIDE_PANEL_WIDTH:
+            return factor
+    return 1
+
+
 def side_by_side(
     a_frames: np.ndarray,
     b_frames: np.ndarray,
@@ -439,7 +451,9 @@ def side_by_side(
     a_film: FrameAxis | None = None,
 ) -> dict[str, Path]:
     """Video and still of two frame stacks with a relative-difference heat-map panel, streamed a window at a
-    time; ``a_film`` converts ``a`` to bins window by window (our gate frames against mitransient's bins)."""
+    time; ``a_film`` converts ``a`` to bins window by window (our gate frames against mitransient's bins).
+    Films wider than SIDE_BY_SIDE_PANEL_WIDTH are box-averaged for the clip (``panel_factor``): the full
+    video's raw and denoised clip was 5760 x 1080 and took minutes of its composite."""
     import matplotlib
 
     a_frames = check_frames(a_frames, labels[0])
@@ -456,12 +470,14 @@ def side_by_side(
     scale = both.exposure(cfg.exposure_percentile)
     floor = 0.01 * float(b_stats.total.mean()) / len(b_frames) + 1e-12  # 1 % of the reference's mean
     colormap = matplotlib.colormaps["inferno"]
-    text = _Labels(film, cfg, a_frames.shape[1], None)
+    shrink = panel_factor(a_frames.shape[1], a_frames.shape[2])
+    text = _Labels(film, cfg, a_frames.shape[1] // shrink, None)
     convert: Callable[[np.ndarray], np.ndarray] = a_film.as_bins if a_film is not None else (lambda window: window)
     path = out_dir / f"{stem}.mp4"
     with Mp4Writer(path, _frame_rate(cfg, film)) as video:
         for (first, a_window), (_, b_window) in zip(frame_windows(a_frames), frame_windows(b_frames)):
-            for k, (a_frame, b_frame) in enumerate(zip(convert(a_window), b_window), start=first):
+            a_window, b_window = box_downsample(convert(a_window), shrink), box_downsample(b_window, shrink)
+            for k, (a_frame, b_frame) in enumerate(zip(a_window, b_window), start=first):
                 a = to_display(a_frame, scale, cfg.tone_curve)
                 b = to_display(b_frame, scale, cfg.tone_curve)
                 diff = relative_difference(a_frame, b_frame, floor=floor)

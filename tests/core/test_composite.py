@@ -117,6 +117,26 @@ def test_streak_images_and_side_by_side(tmp_path):
     assert out["side_by_side_still"].stat().st_size > 1000
 
 
+def test_side_by_side_shrinks_wide_films(tmp_path, monkeypatch):
+    """A film wider than the panel width is box-averaged for the side-by-side clip by the smallest factor that
+    divides both sides: 1080p by 2, 4K by 3 (1280 x 720 panels), the demo's 128 x 96 not at all."""
+    from render.output import composite
+
+    assert [composite.panel_factor(h, w) for h, w in ((1080, 1920), (2160, 3840), (96, 128), (1081, 1921))] == [
+        2,
+        3,
+        1,
+        1,
+    ]
+    frames, cfg, film = pulse_frames(height=80, width=120), CompositeConfig(video_min_height=64), FrameAxis(0.0, 0.003)
+    full = side_by_side(frames, frames * 1.1, ("a", "b"), film, cfg, tmp_path / "full")
+    monkeypatch.setattr(composite, "SIDE_BY_SIDE_PANEL_WIDTH", 60)
+    shrunk = side_by_side(frames, frames * 1.1, ("a", "b"), film, cfg, tmp_path / "shrunk")
+    before, after = probe_mp4(full["side_by_side_video"]), probe_mp4(shrunk["side_by_side_video"])
+    assert before["frames"] == after["frames"] == len(frames)
+    assert (after["width"], after["height"]) == (before["width"] // 2, before["height"] // 2), (before, after)
+
+
 def test_error_metrics_match_hand_computed_values():
     reference = np.array([[1.0, 0.0], [2.0, 0.1]])
     estimate = np.array([[1.5, 0.1], [1.0, 0.1]])
