@@ -452,8 +452,8 @@ def side_by_side(
 ) -> dict[str, Path]:
     """Video and still of two frame stacks with a relative-difference heat-map panel, streamed a window at a
     time; ``a_film`` converts ``a`` to bins window by window (our gate frames against mitransient's bins).
-    Films wider than SIDE_BY_SIDE_PANEL_WIDTH are box-averaged for the clip (``panel_factor``): the full
-    video's raw and denoised clip was 5760 x 1080 and took minutes of its composite."""
+    Films wider than SIDE_BY_SIDE_PANEL_WIDTH are box-averaged for the clip (``panel_factor``) and not
+    enlarged: the full video's raw and denoised clip was 5760 x 1080, wider than many players open."""
     import matplotlib
 
     a_frames = check_frames(a_frames, labels[0])
@@ -482,7 +482,9 @@ def side_by_side(
                 b = to_display(b_frame, scale, cfg.tone_curve)
                 diff = relative_difference(a_frame, b_frame, floor=floor)
                 heat = (colormap(np.clip(diff / cfg.difference_vmax, 0, 1))[..., :3] * 255).astype(np.uint8)
-                row = np.concatenate([upscale(p, cfg.video_min_height // 2) for p in (a, b, heat)], axis=1)
+                # Small films are enlarged for players; shrunk ones are large already.
+                panels = (a, b, heat) if shrink > 1 else [upscale(p, cfg.video_min_height // 2) for p in (a, b, heat)]
+                row = np.concatenate(panels, axis=1)
                 caption = f"{labels[0]} | {labels[1]} | rel. diff 0 to {cfg.difference_vmax:g}"
                 video.write(annotate(row, [caption, text.time(k)]))
     still = out_dir / f"{stem}.png"

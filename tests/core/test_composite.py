@@ -119,7 +119,8 @@ def test_streak_images_and_side_by_side(tmp_path):
 
 def test_side_by_side_shrinks_wide_films(tmp_path, monkeypatch):
     """A film wider than the panel width is box-averaged for the side-by-side clip by the smallest factor that
-    divides both sides: 1080p by 2, 4K by 3 (1280 x 720 panels), the demo's 128 x 96 not at all."""
+    divides both sides: 1080p by 2, 4K by 3 (1280 x 720 panels), the demo's 128 x 96 not at all; a shrunk
+    panel is not enlarged again for small films' sake."""
     from render.output import composite
 
     assert [composite.panel_factor(h, w) for h, w in ((1080, 1920), (2160, 3840), (96, 128), (1081, 1921))] == [
@@ -128,7 +129,8 @@ def test_side_by_side_shrinks_wide_films(tmp_path, monkeypatch):
         1,
         1,
     ]
-    frames, cfg, film = pulse_frames(height=80, width=120), CompositeConfig(video_min_height=64), FrameAxis(0.0, 0.003)
+    # video_min_height 128 would enlarge a 40-row panel to 80 rows; a shrunk panel is left as it is.
+    frames, cfg, film = pulse_frames(height=80, width=120), CompositeConfig(video_min_height=128), FrameAxis(0.0, 0.003)
     full = side_by_side(frames, frames * 1.1, ("a", "b"), film, cfg, tmp_path / "full")
     monkeypatch.setattr(composite, "SIDE_BY_SIDE_PANEL_WIDTH", 60)
     shrunk = side_by_side(frames, frames * 1.1, ("a", "b"), film, cfg, tmp_path / "shrunk")
