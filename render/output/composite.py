@@ -130,13 +130,13 @@ class _Frame:
 
     @cached_property
     def clip_display_lit(self) -> np.ndarray:
-        """Display values in [0, 1] at the clip's exposure of the lit pixels (float64, (N, 3))."""
+        """Display values in [0, 1] at the clip's exposure of the lit pixels (float32, (N, 3))."""
         return display_values(self.frame.reshape(-1, 3)[self.lit], self.clip_scale, self.curve)
 
     @cached_property
     def clip_display(self) -> np.ndarray:
-        """Display values in [0, 1] at the clip's exposure (float64, (H, W, 3))."""
-        return self.scatter(self.clip_display_lit, np.float64)
+        """Display values in [0, 1] at the clip's exposure (float32, (H, W, 3))."""
+        return self.scatter(self.clip_display_lit, np.float32)
 
     def clip_codes(self, top: int, dtype) -> np.ndarray:
         """The clip's display values quantised to 0..``top`` (255 or 65535)."""
