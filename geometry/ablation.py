@@ -139,6 +139,19 @@ def net_energy_fraction(absorbed: np.ndarray, sink: np.ndarray) -> np.ndarray:
     return np.divide(np.maximum(absorbed - sink, 0.0), absorbed, out=np.zeros_like(absorbed), where=absorbed > 0)
 
 
+MELT_GATE_RAMP = 50.0  # [W m-2] over which the net-gain gate opens (DESIGN.md 3.9)
+
+
+def net_gain_gate(
+    absorbed: np.ndarray, seconds: float, sky_view: np.ndarray, sky_loss: float, multiple: float
+) -> np.ndarray:
+    """The share of a cell's melt fraction that a period allows (DESIGN.md 3.9, *Melt needs a net gain*): a surface
+    reaches 0 °C only while it absorbs more than it loses, so the gate opens as the period's mean absorbed flux
+    (``absorbed`` [J m-2] over ``seconds``) rises past ``multiple`` x sky_loss x V_sky, over MELT_GATE_RAMP."""
+    flux = absorbed / max(seconds, 1e-9)
+    return np.clip((flux - multiple * sky_loss * sky_view) / MELT_GATE_RAMP, 0.0, 1.0)
+
+
 def inverse_latent_heat(melt: np.ndarray) -> np.ndarray:
     """1 / L_eff = w / L_f + (1 - w) / L_s [kg J-1]."""
     return melt / LATENT_HEAT_FUSION + (1.0 - melt) / LATENT_HEAT_SUBLIMATION
@@ -429,6 +442,7 @@ class GrowthSettings:
     turbulent_share: float = 0.0  # share of sky_loss that stops where the air is still [-]
     efolding_depth: float = 0.0  # l [m], 0 = no penetration spreading
     slope_order: int = 2  # 2: second-order (minmod ENO) slopes, 1: first-order upwind (DESIGN.md 6.1)
+    melt_gain_threshold: float = 0.0  # melt needs absorbed flux above this x sky_loss x V_sky; 0 = off (3.9)
 
 
 @dataclass
@@ -521,6 +535,11 @@ def grow_field(
             )
             t1 = time.perf_counter()
             melt = switch_melt_fraction(horizons, s) if s.melt_enabled else np.zeros_like(h)
+            if s.melt_gain_threshold > 0 and melt.any():
+                # The period's gross absorbed light does not depend on the melt fraction; only the gate does.
+                gross = _period_energy(h, spacing, s, sun, chunk, horizons, inverse_latent_heat(melt), melt)[2]
+                seconds = float(sun.durations[chunk].sum())
+                melt = melt * net_gain_gate(gross, seconds, horizons.sky_view, s.sky_loss, s.melt_gain_threshold)
             # Absorbed light warms the ice over the e-folding depth: the melting state varies over l, not per cell.
             melt = np.clip(spread_by_penetration(melt, transfer), 0.0, 1.0)
             inverse_heat = inverse_latent_heat(melt)
@@ -599,6 +618,7 @@ def settings_from_config(cfg) -> GrowthSettings:
         shelter_full_melt_deg=cfg.shelter_full_melt_deg,
         wake_slope=cfg.wake_slope,
         turbulent_share=cfg.turbulent_loss_share,
+        melt_gain_threshold=cfg.melt_gain_threshold,
         efolding_depth=cfg.optical_efolding_depth,
         diffusivity=cfg.diffusivity,
         hyperdiffusivity=cfg.hyperdiffusivity,

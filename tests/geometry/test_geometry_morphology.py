@@ -19,8 +19,8 @@ SITES = Path(__file__).resolve().parents[2] / "configs" / "presets" / "sites"
 REDUCED = dict(grid_cells=128, domain_size=4.0, days=60, snapshots=13)  # a snapshot every 5 days
 
 
-def _grow(preset: str):
-    cfg = GeometryConfig(**{**load_raw(SITES / preset)["geometry"], **REDUCED})
+def _grow(preset: str, **overrides):
+    cfg = GeometryConfig(**{**load_raw(SITES / preset)["geometry"], **REDUCED, **overrides})
     rng = np.random.default_rng(7)
     h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
@@ -63,7 +63,8 @@ def test_aspects_peak_north_and_south(tapado):
     strict=True,
     reason="issue 27: with second-order slopes the 65 S control grows 0.214 m of RMS relief against Tapado's 0.397 m "
     "(54 %; 58 % on 1.6 cm cells); first-order upwind gave 23 %, its numerical diffusion damping the weaker growth. "
-    "The melt switch drives growth at both latitudes (melt off: neither grows); DESIGN.md 7, V3",
+    "The melt switch drives growth at both latitudes (melt off: neither grows); with geometry.melt_gain_threshold 1, off "
+    "by default, it holds (test_65s_null_when_melt_needs_a_net_gain); DESIGN.md 3.9 and 7, V3",
 )
 def test_65s_grows_no_comparable_relief(tapado, high_latitude):
     _, h0_low, low = tapado
@@ -71,6 +72,32 @@ def test_65s_grows_no_comparable_relief(tapado, high_latitude):
     growth_low = low.height.std() - h0_low.std()
     growth_high = high.height.std() - h0_high.std()
     assert growth_high < 0.5 * growth_low
+
+
+def test_65s_null_when_melt_needs_a_net_gain(tapado):
+    """DESIGN.md 3.9, *Melt needs a net gain* (geometry.melt_gain_threshold 1, off by default): a sheltered
+    cell melts only while it absorbs more than its loss rate sky_loss x V_sky. At Tapado the high sun lights the
+    hollows and the season keeps its relief (0.397 m of RMS growth either way when measured); at 65 S the low
+    sun leaves them shaded and the gate closes (0.138 m, 35 %), so the latitude null holds. Without the gate
+    the control grows 54 % (the xfail above)."""
+    _, h0_low, low = tapado
+    _, h0_gated_low, gated_low = _grow("tapado.yaml", melt_gain_threshold=1.0)
+    _, h0_high, high = _grow("high_latitude_65s.yaml", melt_gain_threshold=1.0)
+    growth_low = low.height.std() - h0_low.std()
+    gated_growth_low = gated_low.height.std() - h0_gated_low.std()
+    growth_high = high.height.std() - h0_high.std()
+    assert gated_growth_low == pytest.approx(growth_low, rel=0.05)
+    assert growth_high < 0.5 * gated_growth_low
+
+
+def test_the_net_gain_gate_opens_with_the_absorbed_flux():
+    """The gate is 0 at and below the loss rate, 1 from MELT_GATE_RAMP above it, linear between."""
+    sky_view = np.array([1.0, 1.0, 0.5, 0.5])
+    absorbed = np.array([90.0, 165.0, 45.0, 200.0]) * 3600.0  # an hour's mean flux [W m-2] x 1 h
+    gate = ablation.net_gain_gate(absorbed, 3600.0, sky_view, sky_loss=90.0, multiple=1.0)
+    assert gate == pytest.approx([0.0, 1.0, 0.0, 1.0])
+    half = ablation.net_gain_gate(np.array([115.0 * 3600]), 3600.0, np.array([1.0]), 90.0, 1.0)
+    assert half == pytest.approx([25.0 / ablation.MELT_GATE_RAMP])
 
 
 def test_season_starts_from_the_correlated_surface(tapado):
