@@ -462,29 +462,34 @@ class GrowthResult:
     timings: dict = field(default_factory=dict)
 
 
-def _period_energy(
+@dataclass
+class PeriodLight:
+    """What one frozen-geometry period's sun and sky give the field, whatever melts: each sun position's lit
+    energy and sunward slopes (``beams``), the sky and terrain light per unit true area [J m-2], the gross
+    absorbed flux per unit true area [J m-2] and the flux time [s] (time integral of the horizontal incident
+    flux over the reference flux)."""
+
+    beams: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]  # (lit, p, q, sun vector)
+    sky: np.ndarray
+    terrain: np.ndarray
+    absorbed: np.ndarray
+    flux_seconds: float
+
+
+def _period_light(
     h: np.ndarray,
     spacing: float,
     s: GrowthSettings,
     sun: sunpath.DailySun,
     chunk: np.ndarray,
     horizons: irradiance.Horizons,
-    inverse_heat: np.ndarray,
-    melt: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Absorbed shortwave of one frozen-geometry period, split for the recession step.
-
-    Returns the direct beam per unit horizontal area, already weighted by 1/L_eff over the surface
-    it hits (direct_beam_mass) [kg m-2], and the sky + terrain light per unit true area [J m-2],
-    both absorbed and net of the period's share of the loss to the sky; the gross absorbed flux per
-    unit true area [J m-2]; and the period's flux time [s] (time integral of the horizontal
-    incident flux over the reference flux).
-    """
-    absorptance = 1.0 - s.albedo
-    direct_mass = np.zeros_like(h)  # per horizontal area, times 1/L_eff
+) -> PeriodLight:
+    """The period's light (``PeriodLight``); it does not depend on the melt fraction, so the net-gain gate
+    (3.9) reads its ``absorbed`` before the melt fraction is settled."""
     direct = np.zeros_like(h)  # per true area
     sky = np.zeros_like(h)
     flux_seconds = 0.0
+    beams = []
     slopes = OneSidedSlopes.of(h, spacing, s.slope_order)  # the geometry is frozen for the period
     for j in chunk:
         vector, duration = sun.vectors[j], float(sun.durations[j])
@@ -493,16 +498,36 @@ def _period_energy(
         flux_seconds += duration * (s_b * np.sin(elevation) + s_d) / s.scattered_reference_flux
         p, q = sunward_of(slopes, vector, s.max_slope_deg)
         lit = duration * s_b * irradiance.sun_visibility(h, spacing, vector)
-        direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
+        beams.append((lit, p, q, vector))
         direct += lit * direct_beam_lowering(p, q, vector) / np.sqrt(1.0 + p * p + q * q)
         sky += duration * s_d * horizons.sky_view
     terrain = irradiance.bounce_terrain_light(direct + sky, s.albedo, spacing, horizons, s.bounces)
-    absorbed = absorptance * (direct + sky + terrain)
+    absorbed = (1.0 - s.albedo) * (direct + sky + terrain)
+    return PeriodLight(beams, sky, terrain, absorbed, flux_seconds)
+
+
+def _period_energy(
+    light: PeriodLight,
+    s: GrowthSettings,
+    sun: sunpath.DailySun,
+    chunk: np.ndarray,
+    horizons: irradiance.Horizons,
+    inverse_heat: np.ndarray,
+    melt: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The period's light split for the recession step: the direct beam per unit horizontal area, already
+    weighted by 1/L_eff over the surface it hits (direct_beam_mass) [kg m-2], and the sky + terrain light per
+    unit true area [J m-2], both absorbed and net of the period's share of the loss to the sky."""
+    absorptance = 1.0 - s.albedo
+    direct_mass = np.zeros_like(light.sky)  # per horizontal area, times 1/L_eff
+    for lit, p, q, vector in light.beams:
+        direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
     # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
     share = float(sun.durations[chunk].sum() / sun.durations.sum())
     ventilated = 1.0 - s.turbulent_share * melt
-    kept = net_energy_fraction(absorbed, s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view * ventilated)
-    return absorptance * direct_mass * kept, absorptance * (sky + terrain) * kept, absorbed, flux_seconds
+    sink = s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view * ventilated
+    kept = net_energy_fraction(light.absorbed, sink)
+    return absorptance * direct_mass * kept, absorptance * (light.sky + light.terrain) * kept
 
 
 def grow_field(
@@ -534,18 +559,16 @@ def grow_field(
                 h, spacing, s.azimuths, rotation=rng.uniform(0, 2 * np.pi), wake_slope=s.wake_slope
             )
             t1 = time.perf_counter()
+            light = _period_light(h, spacing, s, sun, chunk, horizons)
+            absorbed, flux_seconds = light.absorbed, light.flux_seconds
             melt = switch_melt_fraction(horizons, s) if s.melt_enabled else np.zeros_like(h)
-            if s.melt_gain_threshold > 0 and melt.any():
-                # The period's gross absorbed light does not depend on the melt fraction; only the gate does.
-                gross = _period_energy(h, spacing, s, sun, chunk, horizons, inverse_latent_heat(melt), melt)[2]
+            if s.melt_gain_threshold > 0:
                 seconds = float(sun.durations[chunk].sum())
-                melt = melt * net_gain_gate(gross, seconds, horizons.sky_view, s.sky_loss, s.melt_gain_threshold)
+                melt = melt * net_gain_gate(absorbed, seconds, horizons.sky_view, s.sky_loss, s.melt_gain_threshold)
             # Absorbed light warms the ice over the e-folding depth: the melting state varies over l, not per cell.
             melt = np.clip(spread_by_penetration(melt, transfer), 0.0, 1.0)
             inverse_heat = inverse_latent_heat(melt)
-            direct_mass, diffuse, absorbed, flux_seconds = _period_energy(
-                h, spacing, s, sun, chunk, horizons, inverse_heat, melt
-            )
+            direct_mass, diffuse = _period_energy(light, s, sun, chunk, horizons, inverse_heat, melt)
             # All light is absorbed over l below the surface and spreads as far sideways, so no feature
             # narrower than l ablates apart from its surroundings (DESIGN.md 3.10, 7 Grid convergence).
             direct_mass = np.maximum(spread_by_penetration(direct_mass, transfer), 0.0)

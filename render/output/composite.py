@@ -133,11 +133,6 @@ class _Frame:
         """Display values in [0, 1] at the clip's exposure of the lit pixels (float32, (N, 3))."""
         return display_values(self.frame.reshape(-1, 3)[self.lit], self.clip_scale, self.curve)
 
-    @cached_property
-    def clip_display(self) -> np.ndarray:
-        """Display values in [0, 1] at the clip's exposure (float32, (H, W, 3))."""
-        return self.scatter(self.clip_display_lit, np.float32)
-
     def clip_codes(self, top: int, dtype) -> np.ndarray:
         """The clip's display values quantised to 0..``top`` (255 or 65535)."""
         return self.scatter(np.round(self.clip_display_lit * top).astype(dtype), dtype)

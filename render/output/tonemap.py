@@ -126,8 +126,8 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 def display_values(frames: np.ndarray, scale: float | np.ndarray, curve: ToneCurve = "reinhard") -> np.ndarray:
     """Linear RGB (..., 3) times ``scale`` -> tone curve -> sRGB encoding, as float32 in [0, 1].
 
-    Float32 throughout: its rounding (6e-8 relative) is 1/60000 of an 8-bit step and 1/240 of a 16-bit one,
-    and the 1080p frame costs a sixth of the float64 computation (render/output/LOOK.md, *Speed*)."""
+    Float32 throughout: its rounding (6e-8 relative) is 1/60000 of an 8-bit step and 1/250 of a 16-bit one,
+    and a 1080p frame costs half the float64 computation (render/output/LOOK.md, *Float32 display values*)."""
     x = np.asarray(frames, dtype=np.float32) * np.asarray(scale, dtype=np.float32)
     return srgb_encode(tone_curve(x, curve))
 
