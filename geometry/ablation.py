@@ -442,7 +442,7 @@ class GrowthSettings:
     turbulent_share: float = 0.0  # share of sky_loss that stops where the air is still [-]
     efolding_depth: float = 0.0  # l [m], 0 = no penetration spreading
     slope_order: int = 2  # 2: second-order (minmod ENO) slopes, 1: first-order upwind (DESIGN.md 6.1)
-    melt_gain_threshold: float = 0.0  # melt needs absorbed flux above this x sky_loss x V_sky; 0 = off (3.9)
+    melt_gain_threshold: float = 1.0  # melt needs absorbed flux above this x sky_loss x V_sky; 0 = off (3.9)
 
 
 @dataclass

@@ -101,14 +101,14 @@ class GeometryConfig(StrictModel):
         "longwave [estimate] [-].",
     )
     melt_gain_threshold: float = Field(
-        0.0,
+        1.0,
         ge=0,
         le=10,
         description="Melt needs a net gain: in each horizon period a cell melts only as far as its mean absorbed "
         "shortwave exceeds this multiple of its loss rate sky_loss x V_sky (opening over 50 W m-2); below it the "
         "surface stays under 0 C and sublimates. 1 is the physical choice and gives the 65 S latitude null "
-        "(geometry/DESIGN.md 3.9); 0 = off, every sheltered cell melts (the default until the field's figures "
-        "are measured with it) [-].",
+        "(geometry/DESIGN.md 3.9); 0 = off, every sheltered cell melts, whatever the sun (the model before "
+        "issue 27) [-].",
     )
     switch_centre: float = Field(
         0.85, gt=0, lt=1, description="Sky-view proxies: switch centre V_c, below it cells start to melt [-]."
