@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.fft
@@ -620,6 +620,31 @@ def grow_field(
         max_daily_change=max_change,
         timings=timings,
     )
+
+
+FLAT_LOWERING_FLOOR = 1e-4  # [m]: a season that lowers flat ground by less than this ablates next to nothing
+
+
+def flat_season_lowering(settings: GrowthSettings, spacing: float) -> float:
+    """How far the season lowers flat ground [m]: the growth model itself on a small flat field, which is
+    unshaded, open to the whole sky and unsheltered (so it sublimates), 0.1-0.4 s a season."""
+    flat = grow_field(np.zeros((8, 8)), spacing, replace(settings, snapshots=2), np.random.default_rng(0))
+    return float(-flat.height.mean())
+
+
+def energy_warnings(cfg) -> list[str]:
+    """Why a config's season may grow nothing: its loss to the sky takes all that flat ground absorbs
+    (DESIGN.md 7, *Limits*: the Rio Blanco preset). Returns the warnings, empty when the ground ablates."""
+    lowering = flat_season_lowering(settings_from_config(cfg), cfg.spacing)
+    if lowering >= FLAT_LOWERING_FLOOR:
+        return []
+    return [
+        f"flat ground loses {1000 * max(0.0, lowering):.2g} mm over the {cfg.days}-day season: geometry.sky_loss = "
+        f"{cfg.sky_loss:g} W m-2 takes nearly all that a surface of geometry.albedo = {cfg.albedo:g} absorbs at "
+        f"geometry.latitude = {cfg.latitude:g} from day {cfg.start_day_of_year}, so the field will barely grow. "
+        "Set a geometry.sky_loss measured for the site's air, or check the albedo and the season "
+        "(geometry/DESIGN.md 7, Limits)"
+    ]
 
 
 def settings_from_config(cfg) -> GrowthSettings:

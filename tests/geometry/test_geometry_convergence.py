@@ -97,6 +97,53 @@ def test_validate_warns_on_a_white_noise_start():
     assert lab.resolution_warnings() == []  # sublimation only: V1's linear start
 
 
+def _flat_season_energy(cfg, sky) -> float:
+    """Sum over the season's days of the flat ground's absorbed shortwave less the day's loss to the sky, each day
+    floored at 0 [J m-2]: (1 - a)(S_b sin e + S_d) over the day's sun positions (V2's flat identity), minus
+    sky_loss x 24 h (V_sky = 1)."""
+    from geometry import sunpath
+
+    total = 0.0
+    for day in range(cfg.days):
+        sun = sunpath.daily_sun_positions(cfg.latitude, cfg.start_day_of_year + day, cfg.sun_positions_per_day)
+        elevations = np.arcsin(sun.vectors[:, 2])
+        flux = [sky.direct_normal(e) * np.sin(e) + sky.diffuse_horizontal(e) for e in elevations]
+        absorbed = (1 - cfg.albedo) * float(np.dot(flux, sun.durations))
+        total += max(0.0, absorbed - cfg.sky_loss * sunpath.SECONDS_PER_DAY)
+    return total
+
+
+@pytest.mark.parametrize("sky_loss", [0.0, 110.0])
+def test_flat_ground_sublimates_what_it_absorbs_beyond_the_sky_loss(sky_loss):
+    """The model on flat ground (ablation.flat_season_lowering) against the energy balance summed by hand: the
+    ground is open to the sky, unshaded and unsheltered, so it sublimates (1 - a) x shortwave - sky_loss per day
+    at L_s. Tapado's preset over 10 days (one horizon period a day, so the day is the balance's unit)."""
+    cfg = GeometryConfig(**{**load_raw(SITES / "tapado.yaml")["geometry"], "days": 10, "sky_loss": sky_loss})
+    settings = ablation.settings_from_config(cfg)
+    assert cfg.horizon_refreshes_per_day == 1
+    expected = (
+        _flat_season_energy(cfg, settings.sky)
+        * cfg.ablation_efficiency
+        / (cfg.density * ablation.LATENT_HEAT_SUBLIMATION)
+    )
+    assert expected > 0.01  # Tapado's ice loses centimetres in ten days even with the loss
+    assert ablation.flat_season_lowering(settings, cfg.spacing) == pytest.approx(expected, rel=1e-9)
+
+
+def test_validate_warns_when_the_sky_loss_takes_all_the_light():
+    """DESIGN.md 7, Limits: Rio Blanco's snow (albedo 0.8) under the default 90 W m-2 sky loss does not ablate,
+    so its season grows nothing; validate and the geometry stage say so and name the keys. Without the loss the
+    same ground loses centimetres, and Tapado's ice is not warned about."""
+    rio = GeometryConfig(**{**load_raw(SITES / "rio_blanco.yaml")["geometry"], "days": 60})
+    assert _flat_season_energy(rio, ablation.settings_from_config(rio).sky) == 0.0
+    warnings = ablation.energy_warnings(rio)
+    assert len(warnings) == 1 and "geometry.sky_loss = 90" in warnings[0] and "geometry.albedo = 0.8" in warnings[0]
+    open_sky = rio.model_copy(update={"sky_loss": 0.0})
+    assert ablation.flat_season_lowering(ablation.settings_from_config(open_sky), rio.spacing) > 0.01
+    assert ablation.energy_warnings(open_sky) == []
+    assert ablation.energy_warnings(load_config(ROOT / "configs" / "demo.yaml").geometry) == []
+
+
 def test_v_groove_albedo_limits():
     """Flat (depth 0) returns the wall albedo; deep grooves trap light; the issue's H = S example."""
     assert irradiance.v_groove_albedo(0.55, 1.0, 0.0) == pytest.approx(0.55)
