@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from geometry import ablation, metrics  # noqa: E402
+from geometry import ablation, metrics, stage  # noqa: E402
 from pipeline.atomic import write_text_atomic  # noqa: E402
 from pipeline.config import load_raw  # noqa: E402
 from pipeline.schema.geometry import GeometryConfig  # noqa: E402
@@ -53,19 +53,19 @@ def grow(overrides: dict, *, grid: int, domain: float, days: int, seed: int) -> 
     rng = np.random.default_rng(seed)
     h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
-    radius = metrics.crest_radius(cfg.optical_efolding_depth)
-    shape = metrics.morphology(grown.height, cfg.spacing, radius)
+    shape = stage.field_metrics(grown, cfg)
     early = int(np.argmin(np.abs(grown.snapshot_days - DAY_EARLY)))
+    radius = metrics.crest_radius(cfg.optical_efolding_depth)  # as field_metrics counts the crests
     return {
         "H": shape["crest_to_trough_m"],
         "spacing": shape["crest_spacing_m"],
         "ratio": shape["spacing_to_height"],
         "density_early": metrics.crest_density(grown.snapshots[early], cfg.spacing, radius),
         "density_end": shape["crest_density_per_m2"],
-        "lean": shape["lean_north_deg"],
+        "lean": shape["lean_toward_equator_deg"],
         "off_east_west": shape["ridge_deviation_from_east_west_deg"],
         "rms_growth": float(grown.height.std() - h0.std()),
-        "warnings": list(cfg.resolution_warnings()),
+        "warnings": ablation.config_warnings(cfg),
     }
 
 

@@ -466,13 +466,14 @@ class GrowthResult:
 class PeriodLight:
     """What one frozen-geometry period's sun and sky give the field, whatever melts: each sun position's lit
     energy and sunward slopes (``beams``), the sky and terrain light per unit true area [J m-2], the gross
-    absorbed flux per unit true area [J m-2] and the flux time [s] (time integral of the horizontal incident
-    flux over the reference flux)."""
+    absorbed flux per unit true area [J m-2], the period's daylight [s] and its flux time [s] (time integral
+    of the horizontal incident flux over the reference flux)."""
 
     beams: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]  # (lit, p, q, sun vector)
     sky: np.ndarray
     terrain: np.ndarray
     absorbed: np.ndarray
+    seconds: float
     flux_seconds: float
 
 
@@ -503,14 +504,13 @@ def _period_light(
         sky += duration * s_d * horizons.sky_view
     terrain = irradiance.bounce_terrain_light(direct + sky, s.albedo, spacing, horizons, s.bounces)
     absorbed = (1.0 - s.albedo) * (direct + sky + terrain)
-    return PeriodLight(beams, sky, terrain, absorbed, flux_seconds)
+    return PeriodLight(beams, sky, terrain, absorbed, float(sun.durations[chunk].sum()), flux_seconds)
 
 
 def _period_energy(
     light: PeriodLight,
     s: GrowthSettings,
     sun: sunpath.DailySun,
-    chunk: np.ndarray,
     horizons: irradiance.Horizons,
     inverse_heat: np.ndarray,
     melt: np.ndarray,
@@ -523,7 +523,7 @@ def _period_energy(
     for lit, p, q, vector in light.beams:
         direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
     # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
-    share = float(sun.durations[chunk].sum() / sun.durations.sum())
+    share = light.seconds / float(sun.durations.sum())
     ventilated = 1.0 - s.turbulent_share * melt
     sink = s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view * ventilated
     kept = net_energy_fraction(light.absorbed, sink)
@@ -563,12 +563,12 @@ def grow_field(
             absorbed, flux_seconds = light.absorbed, light.flux_seconds
             melt = switch_melt_fraction(horizons, s) if s.melt_enabled else np.zeros_like(h)
             if s.melt_gain_threshold > 0:
-                seconds = float(sun.durations[chunk].sum())
-                melt = melt * net_gain_gate(absorbed, seconds, horizons.sky_view, s.sky_loss, s.melt_gain_threshold)
+                gate = net_gain_gate(absorbed, light.seconds, horizons.sky_view, s.sky_loss, s.melt_gain_threshold)
+                melt = melt * gate
             # Absorbed light warms the ice over the e-folding depth: the melting state varies over l, not per cell.
             melt = np.clip(spread_by_penetration(melt, transfer), 0.0, 1.0)
             inverse_heat = inverse_latent_heat(melt)
-            direct_mass, diffuse = _period_energy(light, s, sun, chunk, horizons, inverse_heat, melt)
+            direct_mass, diffuse = _period_energy(light, s, sun, horizons, inverse_heat, melt)
             # All light is absorbed over l below the surface and spreads as far sideways, so no feature
             # narrower than l ablates apart from its surroundings (DESIGN.md 3.10, 7 Grid convergence).
             direct_mass = np.maximum(spread_by_penetration(direct_mass, transfer), 0.0)
@@ -645,6 +645,12 @@ def energy_warnings(cfg) -> list[str]:
         "Set a geometry.sky_loss measured for the site's air, or check the albedo and the season "
         "(geometry/DESIGN.md 7, Limits)"
     ]
+
+
+def config_warnings(cfg) -> list[str]:
+    """Everything ``pipeline validate`` and the geometry stage warn about in a GeometryConfig: cells too coarse for
+    its lengths (``resolution_warnings``) and a season that cannot ablate (``energy_warnings``)."""
+    return [*cfg.resolution_warnings(), *energy_warnings(cfg)]
 
 
 def settings_from_config(cfg) -> GrowthSettings:

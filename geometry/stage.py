@@ -63,7 +63,7 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     from tqdm import tqdm
 
     out_dir = Path(out_dir)
-    for warning in cfg.resolution_warnings() + ablation.energy_warnings(cfg):
+    for warning in ablation.config_warnings(cfg):
         log.warning("%s", warning)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()

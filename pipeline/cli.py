@@ -71,9 +71,9 @@ def validate(
         raise typer.Exit(code=2)
     cfg = _load_or_exit(config, overrides)
     typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False), nl=False)
-    from geometry.ablation import energy_warnings
+    from geometry.ablation import config_warnings
 
-    for warning in cfg.geometry.resolution_warnings() + energy_warnings(cfg.geometry):
+    for warning in config_warnings(cfg.geometry):
         typer.echo(f"warning: {warning}", err=True)
     typer.echo(f"# {config}: valid", err=True)
 
