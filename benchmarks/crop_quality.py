@@ -7,7 +7,9 @@ view, tan(fov'/2) = tan(fov/2) W'/W, so the window is rendered as a camera of it
 camera stands (its origin and target, read from the asset's scene stage), with the full film's time axis.
 
 Two renders of the window, with different seeds: the asset's iterations, denoised as the composite stage
-does (``composite.denoise_quality``), and ``--factor`` times the iterations as the reference. Over the
+does (``composite.denoise_quality``), and ``--factor`` times the iterations as the reference. Both see the
+asset's own field: ``geometry.seed`` holds it at the asset's seed while the run's seed changes the render's
+noise (the run's seed alone would grow another field for each render). Over the
 frames holding more than 1 % of the reference's energy, it prints the per-frame relMSE of the raw and
 the denoised frames against the reference, each frame's sum change, and the flicker of the three films.
 The reference's own noise is part of what remains: at a factor of 16 it is 1/16 of the raw frames'.
@@ -92,7 +94,9 @@ def main() -> None:
     iterations = args.iterations or asset.render.iterations
     name = f"{asset.name}_crop"
     full_scene, _ = _run(args.config, [*args.set, f"name={name}_full"], ("geometry", "scene"))
-    crop = crop_overrides(full_scene / "scene", width, height)
+    # The asset's field in every run; the root seed below changes only the renders' random streams.
+    field_seed = asset.seed if asset.geometry.seed is None else asset.geometry.seed
+    crop = [*crop_overrides(full_scene / "scene", width, height), f"geometry.seed={field_seed}"]
 
     delivered_run, delivered_s = _run(
         args.config,

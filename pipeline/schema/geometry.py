@@ -21,6 +21,14 @@ CELLS_PER_EFOLDING_DEPTH = 1.5
 class GeometryConfig(StrictModel):
     """How a penitente field is grown, meshed and pictured (key path geometry.<field>)."""
 
+    seed: int | None = Field(
+        None,
+        ge=0,
+        le=2**63 - 1,
+        description="Seed of the grown field alone; unset: the run's seed. Set it to keep one field while the run's "
+        "seed draws other render noise, e.g. independent renders of the same field for error bars or a "
+        "reference (benchmarks/crop_quality.py does) [-].",
+    )
     # Site and season
     latitude: float = Field(-30.1, ge=-89.0, le=89.0, description="Site latitude phi, negative south [deg].")
     start_day_of_year: int = Field(

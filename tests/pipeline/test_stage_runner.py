@@ -113,3 +113,31 @@ def test_only_selected_stage_runs_and_needs_finished_upstream(config_file):
     assert calls == ["b"] and [r.name for r in results] == ["b"]
     with pytest.raises(StageError, match="unknown stage 'z'"):
         run_stages(cfg, stages, only=["z"], quiet=True)
+
+
+def test_geometry_seed_holds_the_field_while_the_run_seed_changes(tmp_path):
+    """geometry.seed keeps one grown field across runs whose root seed differs (independent renders of one
+    field, as benchmarks/crop_quality.py needs); unset, the root seed grows another field."""
+    import numpy as np
+
+    from pipeline.stages import STAGES
+
+    path = tmp_path / "tiny.yaml"
+    path.write_text(
+        "extends: [presets/sites/tapado.yaml]\n"
+        f"runs_dir: {tmp_path / 'runs'}\n"
+        "geometry:\n  grid_cells: 64\n  days: 2\n  snapshots: 2\n  preview_size: 128\n"
+    )
+
+    def field(name: str, *overrides: str) -> np.ndarray:
+        cfg = load_config(path, [f"name={name}", *overrides])
+        (result,) = [r for r in run_stages(cfg, STAGES, only=("geometry",), quiet=True) if r.name == "geometry"]
+        with np.load(result.out_dir / "heightfield.npz") as grown:
+            return grown["height"]
+
+    held_1 = field("held_1", "seed=1", "geometry.seed=5")
+    held_2 = field("held_2", "seed=2", "geometry.seed=5")
+    root_5 = field("root_5", "seed=5")
+    root_2 = field("root_2", "seed=2")
+    assert np.array_equal(held_1, held_2) and np.array_equal(held_1, root_5)
+    assert np.abs(root_2 - root_5).max() > 1e-3
