@@ -150,7 +150,13 @@ def main() -> None:
     guides = guide_buffers(delivered_run / "scene")
     start = time.perf_counter()
     denoised_path = delivered_run / "crop_denoised.npy"
-    denoise_film(raw, guides, denoised_path, quality=asset.composite.denoise_quality)
+    denoise_film(
+        raw,
+        guides,
+        denoised_path,
+        quality=asset.composite.denoise_quality,
+        arrival_band=asset.composite.denoise_arrival_band,
+    )
     denoise_s = time.perf_counter() - start
     denoised = np.load(denoised_path)
 

@@ -68,6 +68,15 @@ class CompositeConfig(StrictModel):
         description="Open Image Denoise's quality when denoise is on: on 2 cores a 1920 x 1080 frame takes about "
         "4.6 s at high and 1.3 s at balanced [-].",
     )
+    denoise_arrival_band: Literal["auto", "on", "off"] = Field(
+        "auto",
+        description="When denoising, keep the pixels that the direct light reaches in a frame (the arrival band, "
+        "from the scene's geometry) out of that frame's denoising and give them the gain of one denoised image of "
+        "the first light instead: in dense snow the first light arrives as a spike, which whole-frame denoising "
+        "smears into the pixels beside it. auto: only when the raw film's band holds at least twice the light of "
+        "the frame after it (2.5-4.6 in the demo's and the assets' snow, 0.95 in a thin medium, where it would "
+        "hurt); on / off: always / never (render/output/LOOK.md, *The arrival band*) [-].",
+    )
     exr_frames: bool = Field(
         False,
         description="Also write exr/frame_NNNN.exr, the linear frames with their OPL, time since first light, clip "

@@ -635,7 +635,9 @@ def _denoise(
     from render.output import denoise
 
     start = time.perf_counter()
-    film_out = denoise.denoise_film(frames, guides, out_dir / "frames_denoised.npy", cfg.denoise_quality)
+    film_out = denoise.denoise_film(
+        frames, guides, out_dir / "frames_denoised.npy", cfg.denoise_quality, arrival_band=cfg.denoise_arrival_band
+    )
     seconds = time.perf_counter() - start
     files: dict[str, Path] = {"frames_denoised": out_dir / "frames_denoised.npy"}
     files["denoise_guides"] = denoise.save_guides(guides, out_dir / "denoise_guides.png")
@@ -649,5 +651,11 @@ def _denoise(
         "largest_frame_sum_change": film_out.largest_frame_sum_change,
         "temporal_roughness_raw": film_out.temporal_roughness_raw,
         "temporal_roughness_denoised": film_out.temporal_roughness_denoised,
+        # The arrival band (render/output/LOOK.md): the raw film's sharpness and whether the band was kept apart.
+        "arrival_band": (
+            {"sharpness": film_out.arrival.sharpness, "kept_apart": film_out.arrival.used}
+            if film_out.arrival is not None
+            else None
+        ),
         "files": files,
     }

@@ -8,6 +8,7 @@ frames; nothing here writes over them.
 
 from __future__ import annotations
 
+import math
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,10 +22,21 @@ from render.output.files import frame_windows
 
 @dataclass(frozen=True)
 class Guides:
-    """First-hit albedo [0, 1] and world-space unit normal (facing the camera) per pixel, (H, W, 3) float32."""
+    """First-hit albedo [0, 1] and world-space unit normal (facing the camera) per pixel, (H, W, 3) float32; for a
+    transient film, ``arrival_bins`` (lights, 2, H, W) int32: the first and last frame that each light's direct
+    arrival reaches within each pixel (-1: none; render.scene.guides.arrival_bins), which denoise_film keeps
+    apart from the rest of each frame (render/output/LOOK.md, *The arrival band*)."""
 
     albedo: np.ndarray
     normal: np.ndarray
+    arrival_bins: np.ndarray | None = None
+
+    def band(self, frame: int) -> np.ndarray | None:
+        """(H, W) bool: the pixels whose direct arrival falls in ``frame``; None without arrival bins."""
+        if self.arrival_bins is None:
+            return None
+        first, last = self.arrival_bins[:, 0], self.arrival_bins[:, 1]
+        return np.any((first <= frame) & (frame <= last) & (first >= 0), axis=0)
 
 
 QUALITIES = ("high", "balanced", "fast")  # Open Image Denoise's quality levels, as composite.denoise_quality names them
@@ -123,6 +135,24 @@ def denoise_frame(frame: np.ndarray, guides: Guides, quality: str = "high") -> n
         return denoiser(frame)
 
 
+# The arrival band is kept apart when the first light is a spike: over the band pixels, their light in their
+# arrival frames at least this many times their light in the frame after (render/output/LOOK.md, *The arrival
+# band*; measured 2.5-4.6 in the demo's and the assets' snow, 0.95 in a thin medium, where it would hurt).
+SHARP_ARRIVAL = 2.0
+ARRIVAL_BAND_MODES = ("auto", "on", "off")
+
+
+@dataclass(frozen=True)
+class ArrivalBand:
+    """What denoise_film did with the arrival band: ``sharpness`` (the band pixels' light in their arrival frames
+    over theirs in the frame after, from the raw film), whether the band was kept apart (``used``), and the
+    prompt image's gain (H, W, 3) when it was."""
+
+    sharpness: float
+    used: bool
+    gain: np.ndarray | None
+
+
 @dataclass(frozen=True)
 class DenoisedFilm:
     """A denoised stack (memory-mapped) with what one pass over it measured: the largest relative change of a lit
@@ -132,13 +162,21 @@ class DenoisedFilm:
     largest_frame_sum_change: float
     temporal_roughness_raw: float
     temporal_roughness_denoised: float
+    arrival: ArrivalBand | None = None
 
 
 def denoise_film(
-    frames: np.ndarray, guides: Guides, path: Path, quality: str = "high", progress: bool = True
+    frames: np.ndarray,
+    guides: Guides,
+    path: Path,
+    quality: str = "high",
+    progress: bool = True,
+    arrival_band: str = "auto",
 ) -> DenoisedFilm:
     """Denoise a (T, H, W, 3) stack (in memory or memory-mapped) frame by frame into ``path`` (.npy), written to a
-    temporary file and renamed when complete, measuring the frames as they pass.
+    temporary file and renamed when complete, measuring the frames as they pass. With arrival bins in the guides
+    and ``arrival_band`` "auto" or "on", a first pass over the film sums the prompt image and decides whether the
+    band is kept apart (``_arrival_band``); the frames are then denoised in a second.
 
     The film is read a window at a time (``files.frame_windows``, which drops a memory-mapped film's pages after
     each window) and the denoised frames are appended to the file as they are made, so the pass holds a window
@@ -164,11 +202,15 @@ def denoise_film(
         open(temporary, "wb") as out,
         tqdm(total=shape[0], desc="denoise", unit="frame", disable=not progress, leave=False) as bar,
     ):
+        arrival = _arrival_band(frames, guides, denoiser, arrival_band)
+        gain = arrival.gain if arrival is not None else None
         np.lib.format.write_array_header_1_0(out, header)
+        index = 0
         for _, window in frame_windows(frames):
             for frame in window:
                 frame = np.asarray(frame, np.float32)
-                denoised = denoiser(frame)
+                denoised = _denoise_with_band(frame, guides.band(index), gain, denoiser)
+                index += 1
                 out.write(denoised.data)
                 raw_sum = float(np.sum(frame, dtype=np.float64))
                 if raw_sum > 0:
@@ -177,7 +219,59 @@ def denoise_film(
                 raw_flicker.add(frame)
                 denoised_flicker.add(denoised)
                 bar.update()
-    return DenoisedFilm(np.load(path, mmap_mode="r"), largest_change, raw_flicker.value, denoised_flicker.value)
+    return DenoisedFilm(
+        np.load(path, mmap_mode="r"), largest_change, raw_flicker.value, denoised_flicker.value, arrival
+    )
+
+
+def _arrival_band(frames: np.ndarray, guides: Guides, denoiser: Denoiser, mode: str) -> ArrivalBand | None:
+    """The arrival band of a film (None without arrival bins or with mode "off"): one pass over the raw frames
+    sums the prompt image P (each pixel's light in the frames its direct arrival falls in) and the same pixels'
+    light in the frame after; with mode "on", or "auto" and a sharpness of at least SHARP_ARRIVAL, P is denoised
+    and the gain is the denoised P over P (0 where P is 0).
+
+    P is one image of the first light: each band pixel's value in its arrival frames, which a frame's own
+    denoising smears into the pixels beside it. Denoised on its own it is as clean as a steady image, and each
+    band pixel keeps its raw split between its arrival frames (render/output/LOOK.md, *The arrival band*)."""
+    if mode not in ARRIVAL_BAND_MODES:
+        raise ValueError(f"arrival_band must be one of {', '.join(ARRIVAL_BAND_MODES)}, got {mode!r}")
+    if guides.arrival_bins is None or mode == "off":
+        return None
+    prompt = np.zeros(guides.albedo.shape, np.float64)
+    after = 0.0
+    seen = guides.arrival_bins[:, 0] >= 0
+    index = 0
+    for _, window in frame_windows(frames):
+        for frame in window:
+            band = guides.band(index)
+            following = np.any(seen & (guides.arrival_bins[:, 1] == index - 1), axis=0)
+            index += 1
+            if band is not None and band.any():
+                prompt[band] += np.asarray(frame, np.float64)[band]
+            if following.any():
+                after += float(np.asarray(frame, np.float64)[following].sum())
+    total = float(prompt.sum())
+    sharpness = total / after if after > 0 else (math.inf if total > 0 else 0.0)
+    used = total > 0 and (mode == "on" or sharpness >= SHARP_ARRIVAL)
+    if not used:
+        return ArrivalBand(sharpness, False, None)
+    clean = denoiser(prompt.astype(np.float32)).astype(np.float64)
+    return ArrivalBand(sharpness, True, np.divide(clean, prompt, out=np.zeros_like(prompt), where=prompt > 0))
+
+
+def _denoise_with_band(frame: np.ndarray, band: np.ndarray | None, gain: np.ndarray | None, denoiser: Denoiser):
+    """One frame: without a band, through the denoiser as it is. With one, the band pixels leave the denoiser's
+    input (they go back scaled by the prompt image's gain) and the rest is denoised alone; the frame is then kept
+    at its raw sum per channel, as every denoised frame is."""
+    if band is None or gain is None or not band.any():
+        return denoiser(frame)
+    rest = frame.copy()
+    rest[band] = 0.0
+    out = denoiser(rest).astype(np.float64)
+    out[band] += np.asarray(frame, np.float64)[band] * gain[band]
+    raw_sum, out_sum = np.asarray(frame, np.float64).sum(axis=(0, 1)), out.sum(axis=(0, 1))
+    out *= np.divide(raw_sum, out_sum, out=np.ones(3), where=out_sum > 0)
+    return out.astype(np.float32)
 
 
 def save_guides(guides: Guides, path: Path) -> Path:

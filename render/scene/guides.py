@@ -33,6 +33,47 @@ def _shape_albedo(shape: Shape, optics: dict) -> np.ndarray:
     return np.zeros(3)
 
 
+def arrival_bins(scene: Scene, core: dict) -> np.ndarray | None:
+    """For every light with a time origin (render.scene.build.direct_arrivals: the sun, point and spot lights,
+    then the emitting shapes), the first and last film bin that its direct light (light -> visible surface ->
+    pinhole, shadows ignored) reaches within each pixel, from the OPL at the pixel's four corners:
+    (lights, 2, H, W) int32, -1 where the pixel sees no surface. None for a steady film or a scene whose lights
+    have no time origin (a sky alone)."""
+    from render.scene.build import direct_arrivals
+
+    film, camera = scene.film, scene.camera
+    if film.mode != "transient" or film.temporal_bins < 1:
+        return None
+    emitters = [i for i, shape in enumerate(scene.shapes) if shape.emission is not None and any(shape.emission)]
+    meshes = [(core["shapes"][i]["vertices"], core["shapes"][i]["faces"]) for i in range(len(scene.shapes))]
+    offsets = [core["shapes"][i].get("offsets") for i in range(len(scene.shapes))]
+    surfaces = [i for i in range(len(scene.shapes)) if i not in emitters]
+    centres = [np.asarray(meshes[i][0], np.float64).mean(axis=0) for i in emitters]
+    width, height = camera.width, camera.height
+    # (W + 1) x (H + 1) rays: direct_arrivals then samples the pixel corners exactly.
+    opl = direct_arrivals(
+        camera,
+        scene.lights,
+        [meshes[i] for i in surfaces],
+        centres,
+        max_rays=(width + 1) * (height + 1),
+        offsets=[offsets[i] for i in surfaces],
+    )
+    if opl.shape[0] == 0:
+        return None
+    bins = np.floor((opl - film.start_opl) / film.bin_width_opl)
+    corners = np.stack([bins[:, i : i + height, j : j + width] for i in (0, 1) for j in (0, 1)])
+    seen = np.isfinite(corners)
+    first = np.where(seen, corners, np.inf).min(axis=0)
+    last = np.where(seen, corners, -np.inf).max(axis=0)
+    out = np.full((opl.shape[0], 2, height, width), -1, np.int32)
+    lit = np.isfinite(first)
+    limit = film.temporal_bins  # a bin past the film's end stands for "after it"
+    out[:, 0][lit] = np.clip(first[lit], -1, limit).astype(np.int32)
+    out[:, 1][lit] = np.clip(last[lit], -1, limit).astype(np.int32)
+    return out
+
+
 def guide_buffers(scene_dir: str | Path, samples: int = GUIDE_SAMPLES) -> Guides:
     """Albedo and normal of the first camera hit in the scene folder the scene stage wrote (``scene.json``,
     its meshes and ``optics.json``), averaged over ``samples`` x ``samples`` stratified rays per pixel."""
@@ -72,4 +113,8 @@ def guide_buffers(scene_dir: str | Path, samples: int = GUIDE_SAMPLES) -> Guides
         per_ray = (*pixel_y.shape, per_pixel, 3)
         albedo[top : top + rows] = table[first].reshape(per_ray).mean(axis=2)
         normal[top : top + rows] = facing.reshape(per_ray).mean(axis=2)
-    return Guides(albedo=np.ascontiguousarray(albedo, np.float32), normal=np.ascontiguousarray(normal, np.float32))
+    return Guides(
+        albedo=np.ascontiguousarray(albedo, np.float32),
+        normal=np.ascontiguousarray(normal, np.float32),
+        arrival_bins=arrival_bins(scene, core),
+    )

@@ -89,6 +89,34 @@ def test_guides_are_the_first_hit_of_the_scene(runs):
     np.testing.assert_allclose(guides.normal[top], np.broadcast_to([0, 0, 1], guides.normal[top].shape), atol=1e-5)
 
 
+def test_arrival_bins_are_where_the_first_light_is(runs):
+    """The guides' arrival bins (the sun's direct light over each pixel's corners) against the 16x longer render:
+    pixels that see no surface have none; on the block no light comes before a pixel's first arrival frame
+    (nothing is faster than the direct path), and its arrival frames hold light."""
+    noisy, long = runs
+    guides = guide_buffers(noisy / "scene")
+    frames = np.load(long / "render" / "frames.npy")
+    bins = guides.arrival_bins
+    assert bins is not None and bins.shape == (1, 2, *frames.shape[1:3])
+    first, last = bins[0]
+    # Pixels whose 16 guide rays and whose neighbours' all miss: their corners miss too.
+    missed = np.pad(np.linalg.norm(guides.normal, axis=2) < 1e-6, 1, constant_values=True)
+    empty = np.all([np.roll(np.roll(missed, dy, 0), dx, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+    empty = empty[1:-1, 1:-1]
+    assert empty.sum() > 20 and np.all(first[empty] == -1) and np.all(last[empty] == -1)
+    seen = (first >= 0) & (last < frames.shape[0])
+    assert seen.sum() > 100 and np.all(last[seen] >= first[seen])
+    light = frames.sum(axis=3)  # (T, H, W)
+    k = np.arange(frames.shape[0])[:, None, None]
+    early = (k < first[None]) & seen[None]
+    assert float(light[early].sum()) == 0.0
+    in_band = (k >= first[None]) & (k <= last[None]) & seen[None]
+    rows, cols = np.nonzero(seen)
+    held = in_band.reshape(frames.shape[0], -1)[:, rows * frames.shape[2] + cols]
+    lit_in_band = (light.reshape(frames.shape[0], -1)[:, rows * frames.shape[2] + cols] * held).sum(axis=0) > 0
+    assert lit_in_band.mean() > 0.9, lit_in_band.mean()
+
+
 def test_denoised_frames_keep_their_sums_and_approach_a_longer_render(runs):
     """Each denoised frame keeps its raw frame's sum per channel (to float rounding); over the frames holding
     more than 1 % of the energy, the denoised frames' relMSE against a 16x longer render (another seed) is below
@@ -129,6 +157,9 @@ def test_the_still_is_denoised_and_keeps_its_sum(runs):
         assert Image.open(noisy / "composite" / name).size == (raw.shape[1], raw.shape[0])
     summary = json.loads((noisy / "composite" / "manifest.json").read_text())["summary"]
     assert summary["denoise"]["still_sum_change"] < 1e-4
+    # The block's thin medium sends its first light back over several frames, not as a spike: the band stays in.
+    band = summary["denoise"]["arrival_band"]
+    assert band["kept_apart"] is False and 0.5 < band["sharpness"] < 2.0, band
     assert {"still_raw.png", "steady_denoised.exr"} <= set(summary["files"])
 
 
