@@ -67,10 +67,12 @@ def arrival_bins(scene: Scene, core: dict) -> np.ndarray | None:
     first = np.where(seen, corners, np.inf).min(axis=0)
     last = np.where(seen, corners, -np.inf).max(axis=0)
     out = np.full((opl.shape[0], 2, height, width), -1, np.int32)
-    lit = np.isfinite(first)
-    limit = film.temporal_bins  # a bin past the film's end stands for "after it"
-    out[:, 0][lit] = np.clip(first[lit], -1, limit).astype(np.int32)
-    out[:, 1][lit] = np.clip(last[lit], -1, limit).astype(np.int32)
+    # A range that ends before the film's first frame is none; one that starts before it starts at frame 0; a
+    # bin past the film's end stands for "after it".
+    lit = np.isfinite(first) & (last >= 0)
+    limit = film.temporal_bins
+    out[:, 0][lit] = np.clip(first[lit], 0, limit).astype(np.int32)
+    out[:, 1][lit] = np.clip(last[lit], 0, limit).astype(np.int32)
     return out
 
 

@@ -100,3 +100,48 @@ def test_auto_keeps_the_band_apart_only_for_a_sharp_first_light(tmp_path: Path):
     assert off.arrival is None
     with pytest.raises(ValueError, match="arrival_band"):
         denoise_film(raw, guides, tmp_path / "bad.npy", "fast", progress=False, arrival_band="maybe")
+
+
+def test_arrival_bins_follow_the_direct_path_over_each_pixel():
+    """render.scene.guides.arrival_bins on a plane seen from above under a zenith sun: a corner's direct light
+    arrives at OPL (z0 - 0) + |camera - point| (the sun's time origin z0 = 10 m above the plane), so each pixel's
+    first and last bins are those of its nearest and farthest corner; a pixel whose light comes before the film's
+    first frame starts at frame 0, one whose light comes wholly before it has none, and pixels past the plane
+    have none."""
+    from render.scene.guides import arrival_bins
+    from render.scene.model import Camera, Film, Scene, Shape, camera_ray_direction
+
+    half = 2.0
+    vertices = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]], float)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    camera = Camera(origin=(0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=90.0, width=40, height=30)
+    start, width = 13.05, 0.02
+    film = Film(mode="transient", temporal_bins=40, start_opl=start, bin_width_opl=width)
+    sun = {"type": "sun", "to_sun": [0.0, 0.0, 1.0], "tau_origin_point": [0.0, 0.0, 10.0]}
+    scene = Scene(
+        camera=camera, film=film, shapes=[Shape(name="plane", mesh="plane.ply", kind="diffuse")], lights=[sun]
+    )
+    core = {"shapes": [{"vertices": vertices, "faces": faces}]}
+    bins = arrival_bins(scene, core)
+    assert bins is not None and bins.shape == (1, 2, 30, 40)
+
+    def corner_bins(x, y):
+        d = camera_ray_direction(camera, np.asarray(x, float), np.asarray(y, float))
+        t = 3.0 / -d[..., 2]
+        hit = np.abs(t * d[..., 0]) <= half
+        hit &= np.abs(t * d[..., 1]) <= half
+        return np.where(hit, np.floor((10.0 + t - start) / width), np.nan)
+
+    ys, xs = np.mgrid[0:31, 0:41]
+    corners = corner_bins(xs, ys)
+    quad = np.stack([corners[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)])
+    inside = np.all(np.isfinite(quad), axis=0)
+    first, last = np.min(quad, axis=0), np.max(quad, axis=0)
+    in_film = inside & (last >= 0)
+    np.testing.assert_array_equal(bins[0, 0][in_film], np.clip(first[in_film], 0, 40))
+    np.testing.assert_array_equal(bins[0, 1][in_film], np.clip(last[in_film], 0, 40))
+    # The centre sees the plane at 3 m (OPL 13.0, before the film), the edges later: both cases occur.
+    assert np.any(in_film & (first < 0)) and np.any(inside & (last < 0))
+    assert np.all(bins[0, :, inside & (last < 0)] == -1)
+    missed = np.all(np.isnan(quad), axis=0)
+    assert missed.sum() > 0 and np.all(bins[0, :, missed] == -1)
