@@ -13,8 +13,8 @@ noise (the run's seed alone would grow another field for each render). Over the
 frames holding more than 1 % of the reference's energy, it prints the per-frame relMSE of the raw and
 the denoised frames against the reference, each frame's sum change, and the flicker of the three films.
 The reference renders in two independent halves (``--factor`` / 2 times the iterations each) and its own
-noise, estimated from their difference, is taken out of every figure (``HalvesError``); against one render it
-would stay in as a floor under every delivered frame.
+noise, estimated from their difference, is taken out of every figure (ptpb_bench_scene.FrameError, per frame);
+against one render it would stay in as a floor under every delivered frame.
 
     python benchmarks/crop_quality.py configs/assets/video.yaml
     python benchmarks/crop_quality.py configs/assets/video.yaml --iterations 16 --factor 16
@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -36,8 +37,10 @@ from pipeline.config import load_config
 from pipeline.runner import run_dir, run_stages
 from pipeline.stages import STAGES
 from render.output.denoise import TemporalRoughness, denoise_film, denoise_frame
-from render.output.metrics import RELMSE_EPSILON, per_frame_relmse
 from render.scene.guides import guide_buffers
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ptpb_bench_scene import FrameError  # noqa: E402
 
 
 def _run(config_path: Path, overrides: list[str], stages: tuple[str, ...]) -> tuple[Path, float]:
@@ -73,27 +76,6 @@ def crop_overrides(full_scene: Path, width: int, height: int) -> list[str]:
     ]
 
 
-class HalvesError:
-    """Per-frame relMSE against a reference rendered in two independent halves a and b, its own noise taken out.
-
-    With r = (a + b) / 2 and w = 1 / (r^2 + epsilon) (render/output/metrics.py), a render x independent of the
-    reference scores E[(x - r)^2 w] = its own error + E[(r - mu)^2 w]; the second term, the reference's noise,
-    is estimated per frame by mean((a - b)^2 w) / 4 and subtracted (as benchmarks/ptpb_bench_scene.py's
-    FrameError does over a whole film). Against a single render that term stays in as a floor under every
-    delivered frame. The estimate is low where a pixel's light is rare: where both halves miss light of mean mu,
-    the reference costs mu^2 / epsilon but the halves agree (a = b = 0), so what is taken out is at most the
-    reference's noise and the figures left are, if anything, high."""
-
-    def __init__(self, a: np.ndarray, b: np.ndarray) -> None:
-        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-        self.reference = 0.5 * (a + b)
-        weight = 1.0 / (self.reference**2 + RELMSE_EPSILON)
-        self.noise = np.mean((a - b) ** 2 * weight, axis=tuple(range(1, a.ndim))) / 4.0
-
-    def __call__(self, frames: np.ndarray) -> np.ndarray:
-        return per_frame_relmse(frames, self.reference) - self.noise
-
-
 def flicker(frames: np.ndarray) -> float:
     roughness = TemporalRoughness()
     for frame in frames:
@@ -118,8 +100,7 @@ def main() -> None:
     name = f"{asset.name}_crop"
     full_scene, _ = _run(args.config, [*args.set, f"name={name}_full"], ("geometry", "scene"))
     # The asset's field in every run; the root seed below changes only the renders' random streams.
-    field_seed = asset.seed if asset.geometry.seed is None else asset.geometry.seed
-    crop = [*crop_overrides(full_scene / "scene", width, height), f"geometry.seed={field_seed}"]
+    crop = [*crop_overrides(full_scene / "scene", width, height), f"geometry.seed={asset.field_seed()}"]
 
     delivered_run, delivered_s = _run(
         args.config,
@@ -145,7 +126,7 @@ def main() -> None:
         reference_s += seconds
 
     raw = np.load(delivered_run / "render" / "frames.npy")
-    error = HalvesError(*(np.load(run / "render" / "frames.npy") for run in halves))
+    error = FrameError(*(np.load(run / "render" / "frames.npy") for run in halves))
     reference = error.reference
     guides = guide_buffers(delivered_run / "scene")
     start = time.perf_counter()
@@ -161,18 +142,18 @@ def main() -> None:
     denoised = np.load(denoised_path)
 
     steady_raw = np.load(delivered_run / "render" / "steady.npy")
-    steady_error = HalvesError(*(np.load(run / "render" / "steady.npy")[None] for run in halves))
+    steady_error = FrameError(*(np.load(run / "render" / "steady.npy")[None] for run in halves))
     steady_denoised = denoise_frame(steady_raw, guides, asset.composite.denoise_quality)
     still = {
-        "raw": float(steady_error(steady_raw[None])[0]),
-        "denoised": float(steady_error(steady_denoised[None])[0]),
-        "reference_noise": float(steady_error.noise[0]),
+        "raw": float(steady_error.per_frame(steady_raw[None])[0]),
+        "denoised": float(steady_error.per_frame(steady_denoised[None])[0]),
+        "reference_noise": steady_error.reference_noise,
     }
 
     energy = reference.sum(axis=(1, 2, 3))
     held = np.flatnonzero(energy > 0.01 * energy.sum())
-    raw_error, denoised_error = error(raw)[held], error(denoised)[held]
-    reference_noise = error.noise[held]
+    raw_error, denoised_error = error.per_frame(raw)[held], error.per_frame(denoised)[held]
+    reference_noise = error.frame_noise[held]
     sums = denoised.sum(axis=(1, 2)) / np.maximum(raw.sum(axis=(1, 2)), 1e-30)
     result = {
         "config": str(args.config),

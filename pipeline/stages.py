@@ -16,9 +16,7 @@ from pipeline.space import film_bytes, image_bytes
 def geometry_stage(ctx: StageContext) -> dict:
     from geometry.stage import run_geometry_stage
 
-    g = ctx.config.geometry
-    seed = ctx.config.seed if g.seed is None else g.seed
-    return run_geometry_stage(g, ctx.out_dir, seed=seed, quiet=ctx.quiet)
+    return run_geometry_stage(ctx.config.geometry, ctx.out_dir, seed=ctx.config.field_seed(), quiet=ctx.quiet)
 
 
 def _uses_penitentes(config) -> bool:

@@ -65,6 +65,10 @@ class Config(StrictModel):
         description="The lidar stage: a laser altimeter's waveform and range biases over the field.",
     )
 
+    def field_seed(self) -> int:
+        """The grown field's seed: geometry.seed, or the run's seed when it is unset."""
+        return self.seed if self.geometry.seed is None else self.geometry.seed
+
     def render_settings(self) -> PTPBConfig:
         """The render section with the keys it takes from elsewhere: the root's seed and threads, and the
         path depth of the scene, which the reference renders with too."""

@@ -123,10 +123,15 @@ class Denoiser:
         # and each whole-frame temporary would be another.
         out = np.array(self.output, np.float64)
         np.maximum(out, 0.0, out=out)
-        raw_sum, out_sum = np.asarray(frame, np.float64).sum(axis=(0, 1)), out.sum(axis=(0, 1))
-        scale = np.divide(raw_sum, out_sum, out=np.ones(3), where=out_sum > 0)
-        out *= np.maximum(scale, 0.0)
-        return out.astype(np.float32)
+        return _at_raw_sum(out, frame)
+
+
+def _at_raw_sum(out: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """``out`` (float64, scaled in place) kept at the raw frame's sum per channel, as float32."""
+    raw_sum, out_sum = np.asarray(frame, np.float64).sum(axis=(0, 1)), out.sum(axis=(0, 1))
+    scale = np.divide(raw_sum, out_sum, out=np.ones(3), where=out_sum > 0)
+    out *= np.maximum(scale, 0.0)
+    return out.astype(np.float32)
 
 
 def denoise_frame(frame: np.ndarray, guides: Guides, quality: str = "high") -> np.ndarray:
@@ -269,9 +274,7 @@ def _denoise_with_band(frame: np.ndarray, band: np.ndarray | None, gain: np.ndar
     rest[band] = 0.0
     out = denoiser(rest).astype(np.float64)
     out[band] += np.asarray(frame, np.float64)[band] * gain[band]
-    raw_sum, out_sum = np.asarray(frame, np.float64).sum(axis=(0, 1)), out.sum(axis=(0, 1))
-    out *= np.divide(raw_sum, out_sum, out=np.ones(3), where=out_sum > 0)
-    return out.astype(np.float32)
+    return _at_raw_sum(out, frame)
 
 
 def save_guides(guides: Guides, path: Path) -> Path:

@@ -44,20 +44,19 @@ def arrival_bins(scene: Scene, core: dict) -> np.ndarray | None:
     film, camera = scene.film, scene.camera
     if film.mode != "transient" or film.temporal_bins < 1:
         return None
-    emitters = [i for i, shape in enumerate(scene.shapes) if shape.emission is not None and any(shape.emission)]
-    meshes = [(core["shapes"][i]["vertices"], core["shapes"][i]["faces"]) for i in range(len(scene.shapes))]
-    offsets = [core["shapes"][i].get("offsets") for i in range(len(scene.shapes))]
-    surfaces = [i for i in range(len(scene.shapes)) if i not in emitters]
-    centres = [np.asarray(meshes[i][0], np.float64).mean(axis=0) for i in emitters]
+    # As the scene stage times its window: emitters are lights (timed from their centres), the rest surfaces.
+    emits = [shape.emission is not None and any(shape.emission) for shape in scene.shapes]
+    surfaces = [c for c, e in zip(core["shapes"], emits, strict=True) if not e]
+    centres = [np.asarray(c["vertices"], np.float64).mean(axis=0) for c, e in zip(core["shapes"], emits) if e]
     width, height = camera.width, camera.height
     # (W + 1) x (H + 1) rays: direct_arrivals then samples the pixel corners exactly.
     opl = direct_arrivals(
         camera,
         scene.lights,
-        [meshes[i] for i in surfaces],
+        [(c["vertices"], c["faces"]) for c in surfaces],
         centres,
         max_rays=(width + 1) * (height + 1),
-        offsets=[offsets[i] for i in surfaces],
+        offsets=[c.get("offsets") for c in surfaces],
     )
     if opl.shape[0] == 0:
         return None
