@@ -1,12 +1,15 @@
 """Equal-time rows against mitransient where paths matter (issues 16 and 28, render/core/DESIGN.md §12).
 
 For each row scene (configs/bench/dense_cube.yaml, demo_snow.yaml, thesis_set_1.yaml) this renders a long
-mitransient reference once (two halves, cached in benchmarks/results/cache/, as bench_ptpb.py does), then
-mitransient's transient_prbvolpath twice, in whole passes for at least ``--seconds`` of wall time each: as
-shipped (Russian roulette from depth 5) and tuned (roulette from the row's ``reference.rr_depth``, at least
-1000, or ``--tuned-rr``; its survival cap of 0.95 per collision otherwise ends the long paths of dense snow). Ours then renders in bins
-mode for the longer of the two times. Each mitransient error is brought to ours' time as relMSE x time
-(unbiased Monte Carlo: relMSE falls as 1/t), and the ratio is taken against the better of the two. Errors are
+mitransient reference once (two halves in ``reference.tiles`` tiles, as the reference stage renders, cached in
+benchmarks/results/cache/, as bench_ptpb.py does), then mitransient's transient_prbvolpath three times, in
+whole passes for up to ``--seconds`` of wall time each: as shipped (Russian roulette from depth 5, the whole
+film in metres), tuned (roulette from the row's ``reference.rr_depth``, at least 1000, or ``--tuned-rr``; its
+survival cap of 0.95 per collision otherwise ends the long paths of dense snow), and tuned and tiled as the
+reference (Mitsuba's single-precision ray offsets skip some of a dense medium where the scene lies far from
+the origin; tiles cost loads, the whole film does not: render/mitsuba/export.py). Ours then renders in bins
+mode for the longest of the three times. Each mitransient error is brought to ours' time as relMSE x time
+(unbiased Monte Carlo: relMSE falls as 1/t), and the ratio is taken against the best of the three. Errors are
 per-frame relMSE against the reference (its own noise taken out), over all frames and over the late third,
 where snow's error lives. Same phase model and time bins on both sides: both render the scene folder's scene.
 Ours uses the medium estimator that `auto` picks for the scene (reported per row). Writes
@@ -22,7 +25,6 @@ import argparse
 import math
 import subprocess
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,6 +45,7 @@ ROWS = {
     "thesis_set_1": REPO / "configs" / "bench" / "thesis_set_1.yaml",
 }
 THREADS = 2
+BASELINES = ("shipped", "tuned", "tuned_tiled")
 
 
 def scene_folder(path: Path, cfg) -> Path:
@@ -74,31 +77,27 @@ def ours(scene_dir: Path, cfg, seconds: float) -> tuple[np.ndarray, dict]:
     return result.frames, result.stats
 
 
-def mitransient_equal_time(scene_dir: Path, seconds: float, cfg, rr_depth: int) -> tuple[np.ndarray, int, float]:
-    """mitransient's transient_prbvolpath in passes of ``cfg.spp_per_pass`` until ``seconds`` of rendering
-    (after a warm-up), with Russian roulette from ``rr_depth``."""
-    import mitsuba as mi
-
-    from render.mitsuba.export import scene_to_mitsuba, use_variant
+def mitransient_equal_time(
+    scene_dir: Path, seconds: float, cfg, rr_depth: int, tiles: int
+) -> tuple[np.ndarray, int, float]:
+    """mitransient's transient_prbvolpath in passes of ``cfg.spp_per_pass`` for up to ``seconds`` of rendering
+    (after a warm-up that compiles its kernels), with Russian roulette from ``rr_depth``, in ``tiles`` tiles
+    (0: the whole film in metres; render/mitsuba/export.py)."""
+    from render.mitsuba.passes import render_transient
     from render.mitsuba.stage import reference_scene
 
-    use_variant(transient=True)
     scene = reference_scene(scene_dir, cfg.model_copy(update={"rr_depth": rr_depth}))
-    spp_per_pass = cfg.spp_per_pass
-    scene_dict = scene_to_mitsuba(scene, scene_dir, transient=True, spp=spp_per_pass)
-    mi_scene = mi.load_dict(scene_dict)
-    mi.render(mi_scene, seed=99_999, spp=2)  # kernel compilation
-    total, spp, spent, passes = None, 0, 0.0, 0
-    while spent < seconds:
-        t0 = time.perf_counter()
-        out = mi.render(mi_scene, seed=passes, spp=spp_per_pass)
-        frames = np.moveaxis(np.array(out[1], dtype=np.float64)[..., :3], 2, 0)
-        spent += time.perf_counter() - t0
-        total = frames * spp_per_pass if total is None else total + frames * spp_per_pass
-        spp += spp_per_pass
-        passes += 1
-    assert total is not None
-    return total / spp, spp, spent
+    render_transient(scene, scene_dir, spp=2, spp_per_pass=2, seed=99_999, quiet=True, tiles=tiles)
+    frames, _, timing = render_transient(
+        scene,
+        scene_dir,
+        spp=cfg.spp_per_pass,
+        spp_per_pass=cfg.spp_per_pass,
+        time_budget_s=seconds,
+        quiet=True,
+        tiles=tiles,
+    )
+    return frames, int(timing["spp"]), float(timing["seconds"])
 
 
 @dataclass(frozen=True)
@@ -128,30 +127,33 @@ def main() -> None:
     )
     args = parser.parse_args()
     lines = [
-        "| row | ours: estimator | ours relMSE (late third) | mitransient shipped, rr 5 (spp) "
-        "| tuned (rr; spp) | ratio ours / better (late third) | ours [s] | ours/reference frame energy |",
-        "|---|---|---|---|---|---|---|---|",
+        "| row | ours: estimator | ours relMSE (late third) | mitransient shipped, rr 5 (late; spp) "
+        "| tuned (late; rr; spp) | tuned, tiled (late; tiles; spp) | ratio ours / best (late third) | ours [s] "
+        "| ours/reference frame energy |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     csv = [
         "row,estimator_media_on_paths,seconds,ours_relmse,ours_late_relmse,"
-        + ",".join(f"{b}_relmse,{b}_late_relmse,{b}_spp,{b}_seconds" for b in ("shipped", "tuned"))
-        + ",tuned_rr,ratio,late_ratio"
+        + ",".join(f"{b}_relmse,{b}_late_relmse,{b}_spp,{b}_seconds" for b in BASELINES)
+        + ",tuned_rr,tiles,ratio,late_ratio"
     ]
     for row in args.rows:
         cfg = load_config(ROWS[row])
-        baselines = {"shipped": 5, "tuned": args.tuned_rr or max(1000, cfg.reference.rr_depth or 0)}
+        tuned_rr = args.tuned_rr or max(1000, cfg.reference.rr_depth or 0)
+        # (roulette depth, tiles) of each baseline; the tiled one renders as the reference does.
+        baselines = {"shipped": (5, 0), "tuned": (tuned_rr, 0), "tuned_tiled": (tuned_rr, cfg.reference.tiles)}
         scene_dir = scene_folder(ROWS[row], cfg)
         ref = reference(scene_dir, cfg.reference)
         error = ref.frame_error()
         first_late = 2 * error.reference.shape[0] // 3
         late = error.late(first_late)
-        # mitransient renders in whole passes and overshoots --seconds by up to one, so it goes first and ours
-        # then gets the longer of its two times.
+        # mitransient renders in whole passes and stops before the pass that would overrun --seconds, so it
+        # goes first and ours then gets the longest of its times.
         measured = {}
-        for name, rr in baselines.items():
-            frames_mt, spp, spent = mitransient_equal_time(scene_dir, args.seconds, cfg.reference, rr)
+        for name, (rr, tiles) in baselines.items():
+            frames_mt, spp, spent = mitransient_equal_time(scene_dir, args.seconds, cfg.reference, rr, tiles)
             measured[name] = (error(frames_mt), late(frames_mt[first_late:]), spp, spent)
-            print(f"{row}: mitransient {name} (rr {rr}): {spp} spp in {spent:.0f} s", flush=True)
+            print(f"{row}: mitransient {name} (rr {rr}, tiles {tiles}): {spp} spp in {spent:.0f} s", flush=True)
         seconds = max(spent for *_, spent in measured.values())
         frames, stats = ours(scene_dir, cfg, seconds)
         e_ours, e_ours_late = error(frames), late(frames[first_late:])
@@ -172,24 +174,25 @@ def main() -> None:
             f"{row}: ours ({estimator}, {stats['iterations']} iterations, {seconds:.0f} s) relMSE {e_ours:.3g} "
             f"(late third {e_ours_late:.3g}); mitransient at ours' time "
             + "; ".join(f"{n} {b.relmse:.3g} (late {b.late_relmse:.3g})" for n, b in runs.items())
-            + f"; ratio against the better {ratio:.3g} (late third {late_ratio:.3g}); reference noise "
+            + f"; ratio against the best {ratio:.3g} (late third {late_ratio:.3g}); reference noise "
             f"{error.reference_noise:.2g}; ours/reference frame energy {energy_text}",
             flush=True,
         )
-        shipped, tuned = runs["shipped"], runs["tuned"]
+        shipped, tuned, tiled = (runs[b] for b in BASELINES)
         cells = [
             f"{shipped.relmse:.3g} ({shipped.late_relmse:.3g}; {shipped.spp})",
-            f"{tuned.relmse:.3g} ({tuned.late_relmse:.3g}; rr {baselines['tuned']}; {tuned.spp})",
+            f"{tuned.relmse:.3g} ({tuned.late_relmse:.3g}; rr {tuned_rr}; {tuned.spp})",
+            f"{tiled.relmse:.3g} ({tiled.late_relmse:.3g}; {cfg.reference.tiles}; {tiled.spp})",
         ]
         ratio_text, late_text = ("within reference noise" if math.isnan(r) else f"{r:.3g}" for r in (ratio, late_ratio))
         lines.append(
-            f"| {row} | {estimator} | {e_ours:.3g} ({e_ours_late:.3g}) | {cells[0]} | {cells[1]} "
+            f"| {row} | {estimator} | {e_ours:.3g} ({e_ours_late:.3g}) | {' | '.join(cells)} "
             f"| **{ratio_text}** ({late_text}) | {seconds:.0f} | {energy_text} |"
         )
         csv.append(
             f"{row},{stats['path_media']},{seconds:.3f},{e_ours:.6g},{e_ours_late:.6g},"
-            + ",".join(f"{b.relmse:.6g},{b.late_relmse:.6g},{b.spp},{b.seconds:.3f}" for b in (shipped, tuned))
-            + f",{baselines['tuned']},{ratio:.6g},{late_ratio:.6g}"
+            + ",".join(f"{b.relmse:.6g},{b.late_relmse:.6g},{b.spp},{b.seconds:.3f}" for b in (shipped, tuned, tiled))
+            + f",{tuned_rr},{cfg.reference.tiles},{ratio:.6g},{late_ratio:.6g}"
         )
     lines.append("")
     lines.append(
