@@ -336,13 +336,16 @@ def direct_arrivals(
     emitter_centres: list[np.ndarray],
     max_rays: int = 16384,
     offsets: list[np.ndarray | None] | None = None,
+    shadows: bool = False,
 ) -> np.ndarray:
     """OPL of single-scattered light at the surfaces the camera sees, light -> surface point -> pinhole,
     on a grid over the film (its edges included: jittered rays reach the pixel corners).
 
     Returns (lights with a time origin, rows, columns), NaN where the camera sees no surface; the sun,
     point and spot lights come first in scene order, then the emitting shapes. ``offsets[i]``, when given,
-    places mesh i at each of its translations (instanced copies)."""
+    places mesh i at each of its translations (instanced copies). With ``shadows``, also NaN where the light
+    does not reach the point directly: the side the camera sees faces away from it, or a mesh lies between
+    (a spot light's cone is not applied)."""
     from render.ptpb.raytrace import RayEngine
 
     engine = RayEngine()
@@ -359,15 +362,31 @@ def direct_arrivals(
     hits = engine.intersect(origins, directions)
     camera_leg = np.where(hits.hit, hits.t, np.nan).astype(np.float64)
     points = origins + np.nan_to_num(camera_leg)[:, None] * directions
+    # The normal on the side the camera sees, and shadow rays leaving from just off that side (float32 rays: an
+    # offset relative to the point's distance from the origin).
+    normal = np.where((np.sum(hits.normal * directions, axis=1) > 0)[:, None], -hits.normal, hits.normal)
+    starts = points + 1e-5 * (1.0 + np.linalg.norm(points, axis=1))[:, None] * normal
+
+    def reached(towards: np.ndarray, whole_way: bool) -> np.ndarray:
+        """Whether each point sees the light in direction ``towards`` (to it, when ``whole_way``: a position)."""
+        if not shadows:
+            return np.ones(len(points), bool)
+        towards = np.broadcast_to(towards, points.shape)
+        blocked = engine.occluded(starts, towards, tfar=1.0 - 1e-6 if whole_way else None)
+        return (np.sum(normal * towards, axis=1) > 0) & ~blocked
+
     taus = []
     for light in lights:
         if light["type"] == "sun":
             s, p0 = np.asarray(light["to_sun"]), np.asarray(light["tau_origin_point"])
-            taus.append((p0 - points) @ s + camera_leg)
+            taus.append(np.where(reached(s, False), (p0 - points) @ s + camera_leg, np.nan))
         elif light["type"] in ("point", "spot"):
-            taus.append(np.linalg.norm(points - np.asarray(light["position"]), axis=1) + camera_leg)
+            position = np.asarray(light["position"])
+            distance = np.linalg.norm(points - position, axis=1) + camera_leg
+            taus.append(np.where(reached(position - starts, True), distance, np.nan))
     for c in emitter_centres:
-        taus.append(np.linalg.norm(points - c, axis=1) + camera_leg)
+        distance = np.linalg.norm(points - c, axis=1) + camera_leg
+        taus.append(np.where(reached(c - starts, True), distance, np.nan))
     return np.stack(taus).reshape(len(taus), *px.shape) if taus else np.zeros((0, *px.shape))
 
 

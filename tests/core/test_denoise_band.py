@@ -145,3 +145,60 @@ def test_arrival_bins_follow_the_direct_path_over_each_pixel():
     assert np.all(bins[0, :, inside & (last < 0)] == -1)
     missed = np.all(np.isnan(quad), axis=0)
     assert missed.sum() > 0 and np.all(bins[0, :, missed] == -1)
+
+
+def test_arrival_bins_leave_out_shadowed_corners():
+    """The same plane with a 1.04 m square blocker 2 m above it, off the centre, under a zenith sun: a corner that
+    sees the plane inside the blocker's shadow has no direct arrival, so a pixel whose four corners all lie there
+    has no band (-1), and every other pixel takes its bins from its lit corners alone (the blocker's top among
+    them, whose light comes before the film). Lit from below, the side the camera sees faces away: no band at all."""
+    from render.scene.guides import arrival_bins
+    from render.scene.model import Camera, Film, Scene, Shape, camera_ray_direction
+
+    half, centre, size, height = 2.0, (1.03, 0.0), 0.52, 2.0
+    plane = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]], float)
+    blocker = np.array(
+        [[centre[0] + sx * size, centre[1] + sy * size, height] for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    )
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    camera = Camera(origin=(0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=90.0, width=40, height=30)
+    start, width = 13.05, 0.02
+    film = Film(mode="transient", temporal_bins=40, start_opl=start, bin_width_opl=width)
+    shapes = [Shape(name=n, mesh=f"{n}.ply", kind="diffuse") for n in ("plane", "blocker")]
+    core = {"shapes": [{"vertices": plane, "faces": faces}, {"vertices": blocker, "faces": faces}]}
+
+    def sun(z: float) -> dict:
+        return {"type": "sun", "to_sun": [0.0, 0.0, z], "tau_origin_point": [0.0, 0.0, 10.0 * z]}
+
+    bins = arrival_bins(Scene(camera=camera, film=film, shapes=shapes, lights=[sun(1.0)]), core)
+    assert bins is not None
+
+    ys, xs = np.mgrid[0:31, 0:41]
+    d = camera_ray_direction(camera, xs.astype(float), ys.astype(float))
+    t_block = (3.0 - height) / -d[..., 2]
+    on_block = (np.abs(t_block * d[..., 0] - centre[0]) <= size) & (np.abs(t_block * d[..., 1] - centre[1]) <= size)
+    t_plane = 3.0 / -d[..., 2]
+    x, y = t_plane * d[..., 0], t_plane * d[..., 1]
+    on_plane = ~on_block & (np.abs(x) <= half) & (np.abs(y) <= half)
+    shadowed = on_plane & (np.abs(x - centre[0]) < size) & (np.abs(y - centre[1]) < size)
+    opl = np.where(on_block, 10.0 - height + t_block, np.where(on_plane & ~shadowed, 10.0 + t_plane, np.nan))
+    corners = np.floor((opl - start) / width)
+    quad = np.stack([corners[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)])
+    lit = np.any(np.isfinite(quad), axis=0)
+    first, last = np.nanmin(np.where(lit, quad, 0), axis=0), np.nanmax(np.where(lit, quad, 0), axis=0)
+    in_film = lit & (last >= 0)
+    np.testing.assert_array_equal(bins[0, 0][in_film], np.clip(first[in_film], 0, 40))
+    np.testing.assert_array_equal(bins[0, 1][in_film], np.clip(last[in_film], 0, 40))
+    assert np.all(bins[0][:, ~in_film] == -1)
+    in_shadow = np.all(np.stack([shadowed[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)]), axis=0)
+    assert in_shadow.sum() >= 20  # a block of pixels that sees only shadow, which the shadowless bins would band
+    # Pixels half in shadow keep the bins of their lit corners: later than the shadow's edge alone would give.
+    assert np.any(
+        lit
+        & ~in_shadow
+        & np.any(np.stack([shadowed[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)]), axis=0)
+        & in_film
+    )
+
+    below = arrival_bins(Scene(camera=camera, film=film, shapes=shapes, lights=[sun(-1.0)]), core)
+    assert below is not None and np.all(below == -1)
