@@ -16,6 +16,13 @@ The reference renders in two independent halves (``--factor`` / 2 times the iter
 noise, estimated from their difference, is taken out of every figure (ptpb_bench_scene.FrameError, per frame);
 against one render it would stay in as a floor under every delivered frame.
 
+The halves miss part of that noise: light so rare that both miss it leaves them agreeing and the reference
+off. A second delivered render (``--second-seed``, the same iterations) measures it: the two delivered renders'
+difference gives one render's variance, the reference's is that over ``--factor`` (the path estimator's variance
+falls as 1/iterations), and what the halves missed is the difference, a floor left in every figure. The
+figures with it taken out too estimate the error against the truth; the raw render's error less its own variance
+checks it (an unbiased render's error against the truth is its variance).
+
     python benchmarks/crop_quality.py configs/assets/video.yaml
     python benchmarks/crop_quality.py configs/assets/video.yaml --iterations 16 --factor 16
 
@@ -90,6 +97,13 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, help="the delivered render's iterations (default: the config's)")
     parser.add_argument("--factor", type=int, default=16, help="the reference's iterations over the delivered's")
     parser.add_argument("--seed", type=int, default=11, help="the delivered render's seed (the reference: seed + 1)")
+    parser.add_argument(
+        "--second-seed",
+        type=int,
+        default=None,
+        help="a second delivered render's seed, which measures the reference noise its halves miss (default: "
+        "--seed + 10; negative: none)",
+    )
     parser.add_argument("--set", action="append", default=[], help="a further override, as the CLI's --set")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/crop_quality"))
     args = parser.parse_args()
@@ -125,21 +139,41 @@ def main() -> None:
         halves.append(run)
         reference_s += seconds
 
+    second_seed = args.seed + 10 if args.second_seed is None else args.second_seed
+    second_run = None
+    if second_seed >= 0:
+        second_run, _ = _run(
+            args.config,
+            [
+                *args.set,
+                *crop,
+                f"name={name}_{iterations}_s{second_seed}",
+                f"seed={second_seed}",
+                f"render.iterations={iterations}",
+            ],
+            ("geometry", "scene", "render"),
+        )
+
     raw = np.load(delivered_run / "render" / "frames.npy")
     error = FrameError(*(np.load(run / "render" / "frames.npy") for run in halves))
     reference = error.reference
     guides = guide_buffers(delivered_run / "scene")
+
+    def delivered(run: Path) -> np.ndarray:
+        """The run's frames denoised as the composite stage does."""
+        path = run / "crop_denoised.npy"
+        denoise_film(
+            np.load(run / "render" / "frames.npy"),
+            guides,
+            path,
+            quality=asset.composite.denoise_quality,
+            arrival_band=asset.composite.denoise_arrival_band,
+        )
+        return np.load(path)
+
     start = time.perf_counter()
-    denoised_path = delivered_run / "crop_denoised.npy"
-    denoise_film(
-        raw,
-        guides,
-        denoised_path,
-        quality=asset.composite.denoise_quality,
-        arrival_band=asset.composite.denoise_arrival_band,
-    )
+    denoised = delivered(delivered_run)
     denoise_s = time.perf_counter() - start
-    denoised = np.load(denoised_path)
 
     steady_raw = np.load(delivered_run / "render" / "steady.npy")
     steady_error = FrameError(*(np.load(run / "render" / "steady.npy")[None] for run in halves))
@@ -172,6 +206,37 @@ def main() -> None:
         "largest_sum_change": float(np.abs(sums[held] - 1).max()),
         "flicker": {"raw": flicker(raw), "denoised": flicker(denoised), "reference": flicker(reference)},
     }
+    truth_lines: list[str] = []
+    if second_run is not None:
+        raw_2 = np.load(second_run / "render" / "frames.npy")
+        raw_error_2, denoised_error_2 = error.per_frame(raw_2)[held], error.per_frame(delivered(second_run))[held]
+        variance = error.seed_variance(raw, raw_2)[held]
+        missed = variance / args.factor - reference_noise
+        raw_truth = 0.5 * (raw_error + raw_error_2) - missed
+        denoised_truth = [denoised_error - missed, denoised_error_2 - missed]
+        result["second"] = {
+            "seed": second_seed,
+            "raw_relmse_mean": float(raw_error_2.mean()),
+            "denoised_relmse_mean": float(denoised_error_2.mean()),
+        }
+        result["reference_noise_missed"] = missed.tolist()
+        result["against_truth"] = {
+            "raw_relmse_mean": float(raw_truth.mean()),
+            "denoised_relmse_mean": [float(d.mean()) for d in denoised_truth],
+            "raw_error_less_variance": float((0.5 * (raw_error + raw_error_2) - variance).mean()),
+        }
+        ratios = [d.mean() / raw_truth.mean() for d in denoised_truth]
+        truth_lines = [
+            "",
+            f"A second delivered render (seed {second_seed}): raw {raw_error_2.mean():.4f}, denoised "
+            f"{denoised_error_2.mean():.4f} ({denoised_error_2.mean() / raw_error_2.mean():.3f} of raw).",
+            "",
+            f"The reference noise its halves miss, from the two delivered renders' variance "
+            f"({variance.mean():.4f} a render) over {args.factor}: {missed.mean():.4f} a frame, left in every figure "
+            f"above (the raw renders' error less their variance, {result['against_truth']['raw_error_less_variance']:.4f}, "
+            f"measures the same). Taken out too, against the truth: raw {raw_truth.mean():.4f}, denoised "
+            f"{denoised_truth[0].mean():.4f} and {denoised_truth[1].mean():.4f} ({ratios[0]:.3f} and {ratios[1]:.3f} of raw).",
+        ]
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"{asset.name}_{width}x{height}_{iterations}"
     stem.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
@@ -200,6 +265,7 @@ def main() -> None:
         f"Largest change of a frame's sum by denoising: {result['largest_sum_change']:.2e}. Flicker (temporal "
         f"roughness): raw {result['flicker']['raw']:.4f}, denoised {result['flicker']['denoised']:.4f}, "
         f"reference {result['flicker']['reference']:.4f}.",
+        *truth_lines,
     ]
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -168,6 +168,15 @@ class FrameError:
         x = np.asarray(x, np.float64).reshape(self.reference.shape)
         return self._per_frame((x - self.reference) ** 2 * self.weight) - self.frame_noise
 
+    def seed_variance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Per frame, the variance of one render of an unbiased estimator, from two renders x and y of it with
+        independent seeds: mean((x - y)^2 w) / 2, in the units of ``per_frame``. The reference's noise is that of
+        one render divided by how many times longer it ran: the part its halves miss (rare light both missed) is
+        that less ``frame_noise``."""
+        x = np.asarray(x, np.float64).reshape(self.reference.shape)
+        y = np.asarray(y, np.float64).reshape(self.reference.shape)
+        return self._per_frame((x - y) ** 2 * self.weight) / 2.0
+
     def raw(self, x: np.ndarray) -> float:
         return float(
             np.mean((np.asarray(x, np.float64).reshape(self.reference.shape) - self.reference) ** 2 * self.weight)
