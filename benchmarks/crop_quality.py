@@ -116,43 +116,24 @@ def main() -> None:
     # The asset's field in every run; the root seed below changes only the renders' random streams.
     crop = [*crop_overrides(full_scene / "scene", width, height), f"geometry.seed={asset.field_seed()}"]
 
-    delivered_run, delivered_s = _run(
-        args.config,
-        [*args.set, *crop, f"name={name}_{iterations}", f"seed={args.seed}", f"render.iterations={iterations}"],
-        ("geometry", "scene", "render"),
-    )
+    def render_crop(label: str, seed: int, crop_iterations: int) -> tuple[Path, float]:
+        """The window rendered as run ``<name>_<label>`` with this seed and number of iterations."""
+        overrides = [f"name={name}_{label}", f"seed={seed}", f"render.iterations={crop_iterations}"]
+        return _run(args.config, [*args.set, *crop, *overrides], ("geometry", "scene", "render"))
+
+    delivered_run, delivered_s = render_crop(f"{iterations}", args.seed, iterations)
     # The reference in two independent halves (seeds + 1 and + 2, factor / 2 times the iterations each): their
     # mean is the 16x render, and their difference measures its own noise, which is taken out below.
     halves, reference_s = [], 0.0
     for k, half in enumerate("ab"):
-        run, seconds = _run(
-            args.config,
-            [
-                *args.set,
-                *crop,
-                f"name={name}_{iterations * args.factor}{half}",
-                f"seed={args.seed + 1 + k}",
-                f"render.iterations={iterations * args.factor // 2}",
-            ],
-            ("geometry", "scene", "render"),
+        run, seconds = render_crop(
+            f"{iterations * args.factor}{half}", args.seed + 1 + k, iterations * args.factor // 2
         )
         halves.append(run)
         reference_s += seconds
 
     second_seed = args.seed + 10 if args.second_seed is None else args.second_seed
-    second_run = None
-    if second_seed >= 0:
-        second_run, _ = _run(
-            args.config,
-            [
-                *args.set,
-                *crop,
-                f"name={name}_{iterations}_s{second_seed}",
-                f"seed={second_seed}",
-                f"render.iterations={iterations}",
-            ],
-            ("geometry", "scene", "render"),
-        )
+    second_run = render_crop(f"{iterations}_s{second_seed}", second_seed, iterations)[0] if second_seed >= 0 else None
 
     raw = np.load(delivered_run / "render" / "frames.npy")
     error = FrameError(*(np.load(run / "render" / "frames.npy") for run in halves))
