@@ -187,6 +187,8 @@ def main() -> None:
                 missed_reference_noise(e_tiled, spp_tiled, ref.spp, error.reference_noise),
                 missed_reference_noise(e_tiled_late, spp_tiled, ref.spp, late.reference_noise),
             )
+        # measured[name] is (error, late-third error, spp, seconds): each baseline's error less the floor, brought
+        # to ours' time.
         floored = [
             ratio_of(
                 mine - floor,
