@@ -210,12 +210,10 @@ def denoise_film(
         arrival = _arrival_band(frames, guides, denoiser, arrival_band)
         gain = arrival.gain if arrival is not None else None
         np.lib.format.write_array_header_1_0(out, header)
-        index = 0
-        for _, window in frame_windows(frames):
-            for frame in window:
+        for first, window in frame_windows(frames):
+            for index, frame in enumerate(window, first):
                 frame = np.asarray(frame, np.float32)
                 denoised = _denoise_with_band(frame, guides.band(index), gain, denoiser)
-                index += 1
                 out.write(denoised.data)
                 raw_sum = float(np.sum(frame, dtype=np.float64))
                 if raw_sum > 0:
@@ -245,12 +243,10 @@ def _arrival_band(frames: np.ndarray, guides: Guides, denoiser: Denoiser, mode: 
     prompt = np.zeros(guides.albedo.shape, np.float64)
     after = 0.0
     seen = guides.arrival_bins[:, 0] >= 0
-    index = 0
-    for _, window in frame_windows(frames):
-        for frame in window:
+    for first, window in frame_windows(frames):
+        for index, frame in enumerate(window, first):
             band = guides.band(index)
             following = np.any(seen & (guides.arrival_bins[:, 1] == index - 1), axis=0)
-            index += 1
             if band is not None and band.any():
                 prompt[band] += np.asarray(frame, np.float64)[band]
             if following.any():

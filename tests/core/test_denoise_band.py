@@ -102,6 +102,33 @@ def test_auto_keeps_the_band_apart_only_for_a_sharp_first_light(tmp_path: Path):
         denoise_film(raw, guides, tmp_path / "bad.npy", "fast", progress=False, arrival_band="maybe")
 
 
+# The arrival-bin tests' set-up: a 4 m plane at z = 0 seen from 3 m above, 40 x 30 pixels, 40 bins from OPL 13.05.
+PLANE_HALF, CAMERA_HEIGHT, START_OPL, BIN_OPL = 2.0, 3.0, 13.05, 0.02
+SQUARE_FACES = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def square(cx: float, cy: float, half: float, z: float) -> np.ndarray:
+    """The corners of a horizontal square (two triangles with SQUARE_FACES)."""
+    return np.array([[cx + sx * half, cy + sy * half, z] for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))], float)
+
+
+def plane_setup():
+    """(camera, film, the camera's rays through every pixel corner (31, 41, 3)) of the arrival-bin tests."""
+    from render.scene.model import Camera, Film, camera_ray_direction
+
+    camera = Camera(
+        origin=(0.0, 0.0, CAMERA_HEIGHT), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=90.0, width=40, height=30
+    )
+    film = Film(mode="transient", temporal_bins=40, start_opl=START_OPL, bin_width_opl=BIN_OPL)
+    ys, xs = np.mgrid[0:31, 0:41]
+    return camera, film, camera_ray_direction(camera, xs.astype(float), ys.astype(float))
+
+
+def pixel_corners(grid: np.ndarray) -> np.ndarray:
+    """A (31, 41) grid of pixel-corner values as (4, 30, 40): each pixel's four corners."""
+    return np.stack([grid[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)])
+
+
 def test_arrival_bins_follow_the_direct_path_over_each_pixel():
     """render.scene.guides.arrival_bins on a plane seen from above under a zenith sun: a corner's direct light
     arrives at OPL (z0 - 0) + |camera - point| (the sun's time origin z0 = 10 m above the plane), so each pixel's
@@ -109,32 +136,20 @@ def test_arrival_bins_follow_the_direct_path_over_each_pixel():
     first frame starts at frame 0, one whose light comes wholly before it has none, and pixels past the plane
     have none."""
     from render.scene.guides import arrival_bins
-    from render.scene.model import Camera, Film, Scene, Shape, camera_ray_direction
+    from render.scene.model import Scene, Shape
 
-    half = 2.0
-    vertices = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]], float)
-    faces = np.array([[0, 1, 2], [0, 2, 3]])
-    camera = Camera(origin=(0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=90.0, width=40, height=30)
-    start, width = 13.05, 0.02
-    film = Film(mode="transient", temporal_bins=40, start_opl=start, bin_width_opl=width)
+    camera, film, d = plane_setup()
     sun = {"type": "sun", "to_sun": [0.0, 0.0, 1.0], "tau_origin_point": [0.0, 0.0, 10.0]}
     scene = Scene(
         camera=camera, film=film, shapes=[Shape(name="plane", mesh="plane.ply", kind="diffuse")], lights=[sun]
     )
-    core = {"shapes": [{"vertices": vertices, "faces": faces}]}
+    core = {"shapes": [{"vertices": square(0.0, 0.0, PLANE_HALF, 0.0), "faces": SQUARE_FACES}]}
     bins = arrival_bins(scene, core)
     assert bins is not None and bins.shape == (1, 2, 30, 40)
 
-    def corner_bins(x, y):
-        d = camera_ray_direction(camera, np.asarray(x, float), np.asarray(y, float))
-        t = 3.0 / -d[..., 2]
-        hit = np.abs(t * d[..., 0]) <= half
-        hit &= np.abs(t * d[..., 1]) <= half
-        return np.where(hit, np.floor((10.0 + t - start) / width), np.nan)
-
-    ys, xs = np.mgrid[0:31, 0:41]
-    corners = corner_bins(xs, ys)
-    quad = np.stack([corners[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)])
+    t = CAMERA_HEIGHT / -d[..., 2]
+    hit = (np.abs(t * d[..., 0]) <= PLANE_HALF) & (np.abs(t * d[..., 1]) <= PLANE_HALF)
+    quad = pixel_corners(np.where(hit, np.floor((10.0 + t - START_OPL) / BIN_OPL), np.nan))
     inside = np.all(np.isfinite(quad), axis=0)
     first, last = np.min(quad, axis=0), np.max(quad, axis=0)
     in_film = inside & (last >= 0)
@@ -153,19 +168,17 @@ def test_arrival_bins_leave_out_shadowed_corners():
     has no band (-1), and every other pixel takes its bins from its lit corners alone (the blocker's top among
     them, whose light comes before the film). Lit from below, the side the camera sees faces away: no band at all."""
     from render.scene.guides import arrival_bins
-    from render.scene.model import Camera, Film, Scene, Shape, camera_ray_direction
+    from render.scene.model import Scene, Shape
 
-    half, centre, size, height = 2.0, (1.03, 0.0), 0.52, 2.0
-    plane = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]], float)
-    blocker = np.array(
-        [[centre[0] + sx * size, centre[1] + sy * size, height] for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
-    )
-    faces = np.array([[0, 1, 2], [0, 2, 3]])
-    camera = Camera(origin=(0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=90.0, width=40, height=30)
-    start, width = 13.05, 0.02
-    film = Film(mode="transient", temporal_bins=40, start_opl=start, bin_width_opl=width)
+    centre, size, height = (1.03, 0.0), 0.52, 2.0
+    camera, film, d = plane_setup()
     shapes = [Shape(name=n, mesh=f"{n}.ply", kind="diffuse") for n in ("plane", "blocker")]
-    core = {"shapes": [{"vertices": plane, "faces": faces}, {"vertices": blocker, "faces": faces}]}
+    core = {
+        "shapes": [
+            {"vertices": square(0.0, 0.0, PLANE_HALF, 0.0), "faces": SQUARE_FACES},
+            {"vertices": square(*centre, size, height), "faces": SQUARE_FACES},
+        ]
+    }
 
     def sun(z: float) -> dict:
         return {"type": "sun", "to_sun": [0.0, 0.0, z], "tau_origin_point": [0.0, 0.0, 10.0 * z]}
@@ -173,32 +186,25 @@ def test_arrival_bins_leave_out_shadowed_corners():
     bins = arrival_bins(Scene(camera=camera, film=film, shapes=shapes, lights=[sun(1.0)]), core)
     assert bins is not None
 
-    ys, xs = np.mgrid[0:31, 0:41]
-    d = camera_ray_direction(camera, xs.astype(float), ys.astype(float))
-    t_block = (3.0 - height) / -d[..., 2]
+    t_block = (CAMERA_HEIGHT - height) / -d[..., 2]
     on_block = (np.abs(t_block * d[..., 0] - centre[0]) <= size) & (np.abs(t_block * d[..., 1] - centre[1]) <= size)
-    t_plane = 3.0 / -d[..., 2]
+    t_plane = CAMERA_HEIGHT / -d[..., 2]
     x, y = t_plane * d[..., 0], t_plane * d[..., 1]
-    on_plane = ~on_block & (np.abs(x) <= half) & (np.abs(y) <= half)
+    on_plane = ~on_block & (np.abs(x) <= PLANE_HALF) & (np.abs(y) <= PLANE_HALF)
     shadowed = on_plane & (np.abs(x - centre[0]) < size) & (np.abs(y - centre[1]) < size)
     opl = np.where(on_block, 10.0 - height + t_block, np.where(on_plane & ~shadowed, 10.0 + t_plane, np.nan))
-    corners = np.floor((opl - start) / width)
-    quad = np.stack([corners[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)])
+    quad = pixel_corners(np.floor((opl - START_OPL) / BIN_OPL))
     lit = np.any(np.isfinite(quad), axis=0)
     first, last = np.nanmin(np.where(lit, quad, 0), axis=0), np.nanmax(np.where(lit, quad, 0), axis=0)
     in_film = lit & (last >= 0)
     np.testing.assert_array_equal(bins[0, 0][in_film], np.clip(first[in_film], 0, 40))
     np.testing.assert_array_equal(bins[0, 1][in_film], np.clip(last[in_film], 0, 40))
     assert np.all(bins[0][:, ~in_film] == -1)
-    in_shadow = np.all(np.stack([shadowed[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)]), axis=0)
+    shadow_corners = pixel_corners(shadowed)
+    in_shadow = np.all(shadow_corners, axis=0)
     assert in_shadow.sum() >= 20  # a block of pixels that sees only shadow, which the shadowless bins would band
     # Pixels half in shadow keep the bins of their lit corners: later than the shadow's edge alone would give.
-    assert np.any(
-        lit
-        & ~in_shadow
-        & np.any(np.stack([shadowed[i : i + 30, j : j + 40] for i in (0, 1) for j in (0, 1)]), axis=0)
-        & in_film
-    )
+    assert np.any(lit & ~in_shadow & np.any(shadow_corners, axis=0) & in_film)
 
     below = arrival_bins(Scene(camera=camera, film=film, shapes=shapes, lights=[sun(-1.0)]), core)
     assert below is not None and np.all(below == -1)
