@@ -9,10 +9,16 @@
   It renders in ``reference.tiles`` tiles, as the reference stage does: untiled, Mitsuba's ray offsets put
   the dense cube's reference 1.8 % above ours and the tiled one (render/mitsuba/export.py). Two halves let
   the error of a render be corrected for the reference's own noise (``FrameError``).
+  ``per_channel=True`` renders each colour channel on its own, the media grey at that channel's coefficients:
+  in a chromatic medium mitransient draws free flights for one channel and weighs the others by ratios of
+  their transmittances, which multiply over hundreds of collisions into a heavy tail that no affordable spp
+  converges (the thesis row, benchmarks/README.md); transport is linear per channel, so the three grey
+  renders' channels are the same estimate without that tail.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import logging
@@ -79,9 +85,19 @@ class Reference:
         return FrameError(self.steady[0][None], self.steady[1][None])
 
 
-def reference(scene_dir: Path, cfg) -> Reference:
+def grey_channel(scene, channel: int):
+    """``scene`` (render.scene.model.Scene) with every medium grey at its ``channel``'s sigma_s and sigma_a."""
+    media = {
+        name: dataclasses.replace(m, sigma_s=(m.sigma_s[channel],) * 3, sigma_a=(m.sigma_a[channel],) * 3)
+        for name, m in scene.media.items()
+    }
+    return dataclasses.replace(scene, media=media)
+
+
+def reference(scene_dir: Path, cfg, per_channel: bool = False) -> Reference:
     """mitransient at ``cfg.transient_spp`` (two halves), cached; ``cfg`` is the config's reference section
-    (its ``rr_depth``, when set, replaces the scene's, as in the reference stage)."""
+    (its ``rr_depth``, when set, replaces the scene's, as in the reference stage). ``per_channel``: one grey
+    render per channel, each at that spp (module docstring)."""
     import mitsuba
 
     from render.mitsuba.export import disk_sun_opl_shift, use_variant
@@ -102,6 +118,7 @@ def reference(scene_dir: Path, cfg) -> Reference:
             **({"downsample": cfg.downsample} if cfg.downsample != 1 else {}),
             # Keyed only when tiled, so the untiled caches of earlier runs keep their keys.
             **({"tiles": cfg.tiles} if cfg.tiles else {}),
+            **({"per_channel": True} if per_channel else {}),
             "rr_depth": cfg.rr_depth,
             "seeds": REFERENCE_SEEDS,
             "mitsuba": mitsuba.__version__,
@@ -114,14 +131,27 @@ def reference(scene_dir: Path, cfg) -> Reference:
             return Reference(
                 (z["frames_a"], z["frames_b"]), (z["steady_a"], z["steady_b"]), int(z["spp"]), float(z["seconds"])
             )
-    print(f"rendering the reference: mitransient at {spp} spp, cached in {path} (once; minutes) ...", flush=True)
+    what = f"{spp} spp{' a channel' if per_channel else ''}"
+    print(f"rendering the reference: mitransient at {what}, cached in {path} (once; minutes) ...", flush=True)
+
+    def half(seed: int) -> tuple[np.ndarray, np.ndarray]:
+        def run(s, seed: int) -> tuple[np.ndarray, np.ndarray]:
+            frames, steady, _ = render_transient(
+                s, scene_dir, spp=spp // 2, spp_per_pass=cfg.spp_per_pass, seed=seed, quiet=False, tiles=cfg.tiles
+            )
+            return frames, steady
+
+        if not per_channel:
+            return run(scene, seed)
+        grey = [run(grey_channel(scene, c), seed + c) for c in range(3)]
+        frames = np.stack([g[0][..., c] for c, g in enumerate(grey)], axis=-1)
+        steady = np.stack([g[1][..., c] for c, g in enumerate(grey)], axis=-1)
+        return frames, steady
+
     halves = []
     t0 = time.perf_counter()
     for seed in REFERENCE_SEEDS:
-        frames, steady, _ = render_transient(
-            scene, scene_dir, spp=spp // 2, spp_per_pass=cfg.spp_per_pass, seed=seed, quiet=False, tiles=cfg.tiles
-        )
-        halves.append((frames, steady))
+        halves.append(half(seed))
     seconds = time.perf_counter() - t0
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
