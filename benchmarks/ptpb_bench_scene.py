@@ -134,13 +134,13 @@ def reference(scene_dir: Path, cfg, per_channel: bool = False) -> Reference:
     what = f"{spp} spp{' a channel' if per_channel else ''}"
     print(f"rendering the reference: mitransient at {what}, cached in {path} (once; minutes) ...", flush=True)
 
-    def half(seed: int) -> tuple[np.ndarray, np.ndarray]:
-        def run(s, seed: int) -> tuple[np.ndarray, np.ndarray]:
-            frames, steady, _ = render_transient(
-                s, scene_dir, spp=spp // 2, spp_per_pass=cfg.spp_per_pass, seed=seed, quiet=False, tiles=cfg.tiles
-            )
-            return frames, steady
+    def run(s, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        frames, steady, _ = render_transient(
+            s, scene_dir, spp=spp // 2, spp_per_pass=cfg.spp_per_pass, seed=seed, quiet=False, tiles=cfg.tiles
+        )
+        return frames, steady
 
+    def half(seed: int) -> tuple[np.ndarray, np.ndarray]:
         if not per_channel:
             return run(scene, seed)
         grey = [run(grey_channel(scene, c), seed + c) for c in range(3)]
