@@ -109,12 +109,17 @@ def mitransient_equal_time(
 
 @dataclass(frozen=True)
 class Baseline:
-    """One mitransient run of a row: its errors scaled to ours' time (all frames, late third) and its cost."""
+    """One mitransient run of a row: its errors (all frames, late third) and its cost."""
 
     relmse: float
     late_relmse: float
     spp: int
     seconds: float
+
+    def at(self, seconds: float, floor: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float]:
+        """Both errors less ``floor``, brought to ``seconds`` by relMSE x time (unbiased Monte Carlo)."""
+        scale = self.seconds / seconds
+        return (self.relmse - floor[0]) * scale, (self.late_relmse - floor[1]) * scale
 
 
 def missed_reference_noise(error: float, spp: int, reference_spp: int, halves_noise: float) -> float:
@@ -171,35 +176,28 @@ def main() -> None:
         measured = {}
         for name, (rr, tiles) in baselines.items():
             frames_mt, spp, spent = mitransient_equal_time(scene_dir, args.seconds, cfg.reference, rr, tiles)
-            measured[name] = (error(frames_mt), late(frames_mt[first_late:]), spp, spent)
+            measured[name] = Baseline(error(frames_mt), late(frames_mt[first_late:]), spp, spent)
             print(f"{row}: mitransient {name} (rr {rr}, tiles {tiles}): {spp} spp in {spent:.0f} s", flush=True)
-        seconds = max(spent for *_, spent in measured.values())
+        seconds = max(b.seconds for b in measured.values())
         frames, stats = ours(scene_dir, cfg, seconds)
         e_ours, e_ours_late = error(frames), late(frames[first_late:])
         # relMSE x time is what a Monte Carlo render holds fixed: each baseline at ours' time.
-        runs = {
-            name: Baseline(e * spent / seconds, e_late * spent / seconds, spp, spent)
-            for name, (e, e_late, spp, spent) in measured.items()
-        }
+        runs = {name: Baseline(*b.at(seconds), b.spp, b.seconds) for name, b in measured.items()}
         ratio = ratio_of(e_ours, min(b.relmse for b in runs.values()))
         late_ratio = ratio_of(e_ours_late, min(b.late_relmse for b in runs.values()))
         # The same with the reference's missed noise taken out of every error, where the tiled baseline renders
         # exactly as the reference (same roulette and tiles, all channels at once); NaN otherwise.
         floors = (math.nan, math.nan)
         if tuned_rr == (cfg.reference.rr_depth or cfg.scene.rr_depth) and not per_channel:
-            e_tiled, e_tiled_late, spp_tiled, _ = measured["tuned_tiled"]
+            tiled = measured["tuned_tiled"]
             floors = (
-                missed_reference_noise(e_tiled, spp_tiled, ref.spp, error.reference_noise),
-                missed_reference_noise(e_tiled_late, spp_tiled, ref.spp, late.reference_noise),
+                missed_reference_noise(tiled.relmse, tiled.spp, ref.spp, error.reference_noise),
+                missed_reference_noise(tiled.late_relmse, tiled.spp, ref.spp, late.reference_noise),
             )
-        # measured[name] is (error, late-third error, spp, seconds): each baseline's error less the floor, brought
-        # to ours' time.
+        floored_runs = [b.at(seconds, floors) for b in measured.values()]
         floored = [
-            ratio_of(
-                mine - floor,
-                min((m[index] - floor) * m[3] / seconds for m in measured.values()),
-            )
-            for index, (mine, floor) in enumerate(zip((e_ours, e_ours_late), floors, strict=True))
+            ratio_of(e_ours - floors[0], min(e for e, _ in floored_runs)),
+            ratio_of(e_ours_late - floors[1], min(e_late for _, e_late in floored_runs)),
         ]
         # Per-frame energy against the long reference, over the frames holding more than 1 % of it.
         ref_energy = error.reference.sum(axis=(1, 2, 3))
