@@ -14,7 +14,7 @@ import pytest
 
 from pipeline.memory import PeakMemory
 from render.output import files
-from render.output.denoise import Guides, TemporalRoughness, denoise_film
+from render.output.denoise import Guides, TemporalRoughness, _at_raw_light, denoise_film
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_composite_memory import sweeping_pulse_film  # noqa: E402
@@ -23,7 +23,8 @@ pyoidn = pytest.importorskip("pyoidn")
 
 
 def in_memory_denoise_frame(frame: np.ndarray, guides: Guides, quality: str) -> np.ndarray:
-    """The frame's denoising as it was written before the film streamed: whole-frame float64 temporaries."""
+    """The frame's denoising as it was written before the film streamed: whole-frame float64 temporaries (and the
+    local light step the Denoiser takes, render/output/LOOK.md, *Local light*)."""
     if not np.any(frame):
         return np.zeros_like(frame, dtype=np.float32)
     color = np.ascontiguousarray(np.maximum(frame, 0.0), np.float32)
@@ -33,6 +34,7 @@ def in_memory_denoise_frame(frame: np.ndarray, guides: Guides, quality: str) -> 
         ),
         0.0,
     )
+    _at_raw_light(out, color)
     raw_sum, out_sum = np.asarray(frame, np.float64).sum(axis=(0, 1)), out.sum(axis=(0, 1))
     scale = np.divide(raw_sum, out_sum, out=np.ones(3), where=out_sum > 0)
     return (out * np.maximum(scale, 0.0)).astype(np.float32)
