@@ -106,11 +106,11 @@ class Denoiser:
             raise RuntimeError(f"Open Image Denoise: {operation} failed: {error}")
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
-        """One (H, W, 3) linear frame through the filter, then scaled per channel to the raw frame's sum. The
-        network moves light between pixels but was not trained to keep a frame's energy (on the demo at 64
-        iterations it lost 1-4 % of late frames' light); the raw frame's sum is an unbiased estimate of it with
-        far less noise than any pixel, so the denoised frame keeps it. An all-black frame stays black without
-        a call."""
+        """One (H, W, 3) linear frame through the filter, brought to the raw frame's light region by region
+        (``_at_raw_light``), then scaled per channel to the raw frame's sum. The network moves light between
+        pixels but was not trained to keep a frame's energy (on the demo at 64 iterations it lost 1-4 % of late
+        frames' light); the raw frame's sum is an unbiased estimate of it with far less noise than any pixel, so
+        the denoised frame keeps it. An all-black frame stays black without a call."""
         if self._filter is None:
             raise RuntimeError("Denoiser called outside its with block")
         if frame.shape != self.color.shape:
@@ -132,7 +132,7 @@ class Denoiser:
 # (render/output/LOOK.md, *Local light*): the raw light summed over some 2 pi 32^2 ~ 6400 pixels has a few
 # per cent of noise in the full video's late glow, where one raw pixel has more than 100 %. The light is summed
 # in blocks of LOCAL_LIGHT_BLOCK pixels a side first, and the ratio brought back bilinearly: at 1080p that is
-# 0.12 s a frame, against 0.5 s for the same Gaussian over every pixel.
+# 0.15 s a frame, against 0.5 s for the same Gaussian over every pixel.
 LOCAL_LIGHT_SIGMA = 32.0
 LOCAL_LIGHT_BLOCK = 4
 
