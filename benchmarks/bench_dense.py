@@ -28,6 +28,7 @@ import argparse
 import math
 import subprocess
 import sys
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,6 +138,17 @@ def ratio_of(ours_error: float, baseline_error: float) -> float:
     return ours_error / baseline_error if ours_error > 0 and baseline_error > 0 else float("nan")
 
 
+def ratios_against_best(
+    ours: tuple[float, float], baselines: Iterable[Baseline], seconds: float, floor: tuple[float, float] = (0.0, 0.0)
+) -> tuple[float, float]:
+    """Ours' errors (all frames, late third) over the best baseline's at ours' ``seconds``, ``floor`` out of each."""
+    at_ours = [b.at(seconds, floor) for b in baselines]
+    return (
+        ratio_of(ours[0] - floor[0], min(e for e, _ in at_ours)),
+        ratio_of(ours[1] - floor[1], min(e_late for _, e_late in at_ours)),
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="wall time of each side per row [s]")
@@ -181,10 +193,9 @@ def main() -> None:
         seconds = max(b.seconds for b in measured.values())
         frames, stats = ours(scene_dir, cfg, seconds)
         e_ours, e_ours_late = error(frames), late(frames[first_late:])
-        # relMSE x time is what a Monte Carlo render holds fixed: each baseline at ours' time.
+        # relMSE x time is what a Monte Carlo render holds fixed: each baseline at ours' time (the table's cells).
         runs = {name: Baseline(*b.at(seconds), b.spp, b.seconds) for name, b in measured.items()}
-        ratio = ratio_of(e_ours, min(b.relmse for b in runs.values()))
-        late_ratio = ratio_of(e_ours_late, min(b.late_relmse for b in runs.values()))
+        ratio, late_ratio = ratios_against_best((e_ours, e_ours_late), measured.values(), seconds)
         # The same with the reference's missed noise taken out of every error, where the tiled baseline renders
         # exactly as the reference (same roulette and tiles, all channels at once); NaN otherwise.
         floors = (math.nan, math.nan)
@@ -194,11 +205,7 @@ def main() -> None:
                 missed_reference_noise(tiled.relmse, tiled.spp, ref.spp, error.reference_noise),
                 missed_reference_noise(tiled.late_relmse, tiled.spp, ref.spp, late.reference_noise),
             )
-        floored_runs = [b.at(seconds, floors) for b in measured.values()]
-        floored = [
-            ratio_of(e_ours - floors[0], min(e for e, _ in floored_runs)),
-            ratio_of(e_ours_late - floors[1], min(e_late for _, e_late in floored_runs)),
-        ]
+        floored = ratios_against_best((e_ours, e_ours_late), measured.values(), seconds, floors)
         # Per-frame energy against the long reference, over the frames holding more than 1 % of it.
         ref_energy = error.reference.sum(axis=(1, 2, 3))
         energetic = ref_energy > 0.01 * ref_energy.sum()
