@@ -76,10 +76,12 @@ def main() -> None:
                 guides = guide_buffers(Path(args.source).parent / "scene")
             t0 = time.perf_counter()
             with PeakMemory() as memory:
-                denoised = denoise_film(frames, guides, out / "frames_denoised.npy", cfg.denoise_quality, False)
+                denoised = denoise_film(
+                    frames, guides, out / "frames_denoised.npy", cfg.denoise_quality, False, refine=cfg.denoise_refine
+                )
             seconds = time.perf_counter() - t0
             print(
-                f"denoise ({cfg.denoise_quality}, {frames.nbytes / 2**30:.2f} GiB film): {seconds:.1f} s, "
+                f"denoise ({cfg.denoise_quality}{', refined' if cfg.denoise_refine else ''}, {frames.nbytes / 2**30:.2f} GiB film): {seconds:.1f} s, "
                 f"peak {memory.peak_mib:.0f} MiB, {memory.added_mib:.0f} MiB above its start"
             )
             frames = denoised.frames

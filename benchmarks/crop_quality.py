@@ -149,6 +149,7 @@ def main() -> None:
             path,
             quality=asset.composite.denoise_quality,
             arrival_band=asset.composite.denoise_arrival_band,
+            refine=asset.composite.denoise_refine,
         )
         return np.load(path)
 
@@ -158,7 +159,7 @@ def main() -> None:
 
     steady_raw = np.load(delivered_run / "render" / "steady.npy")
     steady_error = FrameError(*(np.load(run / "render" / "steady.npy")[None] for run in halves))
-    steady_denoised = denoise_frame(steady_raw, guides, asset.composite.denoise_quality)
+    steady_denoised = denoise_frame(steady_raw, guides, asset.composite.denoise_quality, asset.composite.denoise_refine)
     still = {
         "raw": float(steady_error.per_frame(steady_raw[None])[0]),
         "denoised": float(steady_error.per_frame(steady_denoised[None])[0]),

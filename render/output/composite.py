@@ -609,7 +609,7 @@ def _denoise_still(steady: np.ndarray, cfg, guides: Guides, out_dir: Path, denoi
     from render.output.exr import write_exr
 
     start = time.perf_counter()
-    delivered = denoise.denoise_frame(steady, guides, cfg.denoise_quality)
+    delivered = denoise.denoise_frame(steady, guides, cfg.denoise_quality, cfg.denoise_refine)
     denoised["still_seconds"] = time.perf_counter() - start
     raw_sum = np.asarray(steady, np.float64).sum()
     denoised["still_sum_change"] = float(abs(delivered.sum(dtype=np.float64) / raw_sum - 1)) if raw_sum > 0 else 0.0
@@ -636,7 +636,12 @@ def _denoise(
 
     start = time.perf_counter()
     film_out = denoise.denoise_film(
-        frames, guides, out_dir / "frames_denoised.npy", cfg.denoise_quality, arrival_band=cfg.denoise_arrival_band
+        frames,
+        guides,
+        out_dir / "frames_denoised.npy",
+        cfg.denoise_quality,
+        arrival_band=cfg.denoise_arrival_band,
+        refine=cfg.denoise_refine,
     )
     seconds = time.perf_counter() - start
     files: dict[str, Path] = {"frames_denoised": out_dir / "frames_denoised.npy"}
