@@ -81,7 +81,8 @@ def main() -> None:
                 )
             seconds = time.perf_counter() - t0
             print(
-                f"denoise ({cfg.denoise_quality}{', refined' if cfg.denoise_refine else ''}, {frames.nbytes / 2**30:.2f} GiB film): {seconds:.1f} s, "
+                f"denoise ({cfg.denoise_quality}{', refined' if cfg.denoise_refine else ''}, "
+                f"{frames.nbytes / 2**30:.2f} GiB film): {seconds:.1f} s, "
                 f"peak {memory.peak_mib:.0f} MiB, {memory.added_mib:.0f} MiB above its start"
             )
             frames = denoised.frames

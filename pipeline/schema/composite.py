@@ -72,9 +72,10 @@ class CompositeConfig(StrictModel):
         True,
         description="When denoising, run Open Image Denoise twice on each frame: the second pass (at balanced) "
         "takes the first pass's frame as its albedo guide, since in snow the first hit's albedo is one colour "
-        "everywhere and tells the network nothing about where the light lies. On the demo's frames 0.087 of the "
-        "raw error instead of 0.102 (two seeds); it costs a balanced pass a frame, about 1.3 s at 1920 x 1080 on "
-        "2 cores (render/output/LOOK.md, *The refining pass*) [-].",
+        "everywhere and tells the network nothing about where the light lies. On the demo's frames 0.091 and 0.086 "
+        "of the raw error instead of 0.108 and 0.103 (two seeds); it costs a balanced pass a frame, about 1.3 s at "
+        "1920 x 1080 on 2 cores. Leave it off where the albedo guide carries the detail (textured surfaces) "
+        "(render/output/LOOK.md, *The refining pass*) [-].",
     )
     denoise_arrival_band: Literal["auto", "on", "off"] = Field(
         "auto",
