@@ -69,16 +69,18 @@ class Denoiser:
     def __init__(self, guides: Guides, quality: str = "high", refine: bool = False) -> None:
         if quality not in QUALITIES:
             raise ValueError(f"denoise quality must be one of {', '.join(QUALITIES)}, got {quality!r}")
-        self.guides, self.quality, self.refine = guides, quality, refine
+        self.guides, self.quality = guides, quality
         height, width = guides.albedo.shape[:2]
         # OIDN reads these through pointers set once (shared images): they live as long as the filter.
         self.color = np.zeros((height, width, 3), np.float32)
         self.output = np.zeros((height, width, 3), np.float32)
         self.albedo = np.ascontiguousarray(guides.albedo, np.float32)
         self.normal = np.ascontiguousarray(guides.normal, np.float32)
-        # The refining pass's own albedo guide and output (never the guides' arrays, which other filters read).
-        self.refine_albedo = np.zeros((height, width, 3), np.float32)
-        self.refine_output = np.zeros((height, width, 3), np.float32)
+        # The refining pass's own albedo guide and output, only with ``refine`` (never the guides' arrays, which
+        # the first filter reads): two more frames, 100 MB each at 4K.
+        self.refine_buffers = (
+            (np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3), np.float32)) if refine else None
+        )
         self._release = ExitStack()
         self._device: Any = None
         self._filter: Any = None
@@ -93,10 +95,8 @@ class Denoiser:
             device.commit()
             self._check(device, "device creation")
             flt = self._rt_filter(pyoidn, device, self.albedo, self.output, self.quality)
-            if self.refine:
-                self._refine_filter = self._rt_filter(
-                    pyoidn, device, self.refine_albedo, self.refine_output, REFINE_QUALITY
-                )
+            if self.refine_buffers is not None:
+                self._refine_filter = self._rt_filter(pyoidn, device, *self.refine_buffers, REFINE_QUALITY)
             self._check(device, "filter set-up")
         except BaseException:
             self._release.close()
@@ -148,10 +148,11 @@ class Denoiser:
             return np.zeros_like(frame, dtype=np.float32)
         np.maximum(frame, 0.0, out=self.color)
         first = self._pass(self._filter, self.output, frame)
-        if self._refine_filter is None:
+        if self.refine_buffers is None:
             return first
-        _refine_guide(first, self.refine_albedo)
-        return self._pass(self._refine_filter, self.refine_output, frame)
+        guide, output = self.refine_buffers
+        _refine_guide(first, guide)
+        return self._pass(self._refine_filter, output, frame)
 
     def _pass(self, flt: Any, output: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """One run of ``flt`` on the colour buffer, its output kept at the raw frame's light and sum."""
