@@ -202,11 +202,12 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()):
 
 def _resolve_relative_paths(raw: dict[str, Any], folder: Path) -> None:
     """Mesh paths relative to the config file's folder become absolute, so a run does not depend on
-    the working directory."""
+    the working directory. A path the operating system cannot name (a NUL byte) stays as written, for
+    validation to refuse naming its key."""
     scene = raw.get("scene")
     objects = scene.get("objects") if isinstance(scene, dict) else None
     for obj in objects if isinstance(objects, list) else []:
-        if isinstance(obj, dict) and isinstance(obj.get("path"), str) and obj["path"]:
+        if isinstance(obj, dict) and isinstance(obj.get("path"), str) and obj["path"] and "\0" not in obj["path"]:
             if not Path(obj["path"]).expanduser().is_absolute():
                 obj["path"] = str((folder / obj["path"]).resolve())
 

@@ -32,6 +32,13 @@ def test_a_missing_mesh_file_is_refused_at_validate_naming_the_key(tmp_path):
         load_config(config)
 
 
+def test_a_path_with_a_nul_byte_is_refused_naming_the_key(tmp_path):
+    # Resolving it against the config's folder raised "embedded null byte" from pathlib before any key was named
+    # (found by test_config_fuzz); it now reaches the input check as written.
+    with pytest.raises(ConfigError, match=r"scene\.objects\.0\.path: .*mesh file not found"):
+        load_config(write_config(tmp_path, "a\x00b.ply"))
+
+
 def test_an_unreadable_mesh_file_is_refused_at_validate(tmp_path):
     (tmp_path / "broken.obj").write_text("not a mesh at all\n")
     with pytest.raises(ConfigError, match=r"scene\.objects\.0\.path: .*broken\.obj: the mesh is empty"):
