@@ -109,7 +109,7 @@ def main() -> None:
     args = parser.parse_args()
 
     width, height = (int(v) for v in args.crop.split("x"))
-    asset = load_config(args.config)
+    asset = load_config(args.config, args.set)  # --set reaches the denoising settings read below too
     iterations = args.iterations or asset.render.iterations
     name = f"{asset.name}_crop"
     full_scene, _ = _run(args.config, [*args.set, f"name={name}_full"], ("geometry", "scene"))
