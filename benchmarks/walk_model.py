@@ -95,8 +95,8 @@ def walk(variant: Variant, paths: int, seed: int, offset: float) -> tuple[np.nda
     cost = 0
     first = True
 
-    def score(i: np.ndarray, value: np.ndarray, time_at_light: np.ndarray) -> None:
-        b = np.floor(time_at_light / BIN_WIDTH).astype(np.int64)
+    def score(i: np.ndarray, value: np.ndarray, path_length: np.ndarray) -> None:
+        b = np.floor(path_length / BIN_WIDTH).astype(np.int64)
         ok = b < BINS
         np.add.at(scores, (i[ok], b[ok]), value[ok])
 
@@ -120,11 +120,10 @@ def walk(variant: Variant, paths: int, seed: int, offset: float) -> tuple[np.nda
             guided = rng.random(i.size) < variant.guide
             mu_guided = nu - (nu + 1.0) * ((nu - 1.0) / (nu + 1.0)) ** rng.random(i.size)
             mu[i] = np.where(guided, mu_guided, 2.0 * rng.random(i.size) - 1.0)
-            stretch = np.where(guided, 1.0 - mu[i] / nu, 1.0)
-            s = rng.exponential(1.0, i.size) / stretch
+            stretched = 1.0 - mu[i] / nu  # the guided flight's extinction
+            s = rng.exponential(1.0, i.size) / np.where(guided, stretched, 1.0)
             guided_pdf = 1.0 / (log_ratio * (nu - mu[i]))
             marginal_ratio = 0.5 / ((1.0 - variant.guide) * 0.5 + variant.guide * guided_pdf)
-            stretched = 1.0 - mu[i] / nu
             pdf = (1.0 - variant.guide) * 0.5 * np.exp(-s) + variant.guide * guided_pdf * stretched * np.exp(
                 -stretched * s
             )
