@@ -176,7 +176,9 @@ def _refine_guide(first: np.ndarray, guide: np.ndarray) -> None:
         guide[...] = 0.0
         return
     level = float(np.percentile(lit, REFINE_GUIDE_PERCENTILE))
-    np.clip(first / level, 0.0, 1.0, out=guide, casting="same_kind")
+    # In the guide's own buffer: no frame-sized temporary (100 MB at 4K) for every frame.
+    np.divide(first, level, out=guide, casting="same_kind")
+    np.clip(guide, 0.0, 1.0, out=guide)
 
 
 # The scale (Gaussian standard deviation, pixels) over which a denoised frame keeps the raw frame's light
