@@ -155,6 +155,26 @@ def walk(variant: Variant, paths: int, seed: int, offset: float) -> tuple[np.nda
     return scores, cost
 
 
+@dataclass(frozen=True)
+class Moments:
+    """What the table needs of a variant's walks: per bin, the mean and the variance of one walk's score."""
+
+    mean: np.ndarray
+    variance: np.ndarray
+    cost: float  # vertices a walk
+
+
+def moments(variant: Variant, paths: int, seed: int, offset: float) -> Moments:
+    scores, cost = walk(variant, paths, seed, offset)
+    return Moments(scores.mean(axis=0), scores.var(axis=0), cost / paths)
+
+
+def relative_variance(m: Moments, core: Moments, frames: np.ndarray, with_cost: bool = True) -> float:
+    """The variant's relative variance (x cost) over the core walk's, averaged over ``frames``."""
+    ratio = float(np.mean((m.variance / core.mean**2)[frames]) / np.mean((core.variance / core.mean**2)[frames]))
+    return ratio * m.cost / core.cost if with_cost else ratio
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--paths", type=int, default=200_000, help="camera walks per variant, seed and offset")
@@ -172,30 +192,20 @@ def main() -> None:
     started = time.perf_counter()
     for seed in args.seeds:
         for offset in (0.0, BIN_WIDTH / 2):
-            runs = {v.name: walk(v, args.paths, seed * 1000 + k, offset) for k, v in enumerate(VARIANTS)}
-            base_scores, base_cost = runs[VARIANTS[0].name]
-            mean = base_scores.mean(axis=0)
-            lit = mean > 0.01 * mean.sum()
-
-            def relvar_cost(scores: np.ndarray, cost: int, frames: np.ndarray, base_mean: np.ndarray = mean) -> float:
-                return float(np.mean((scores.var(axis=0) * cost / base_mean**2)[frames]))
-
-            base_var = base_scores.var(axis=0) / args.paths
+            runs = [moments(v, args.paths, seed * 1000 + k, offset) for k, v in enumerate(VARIANTS)]
+            core = runs[0]
+            lit = core.mean > 0.01 * core.mean.sum()
             first_lit = np.zeros(BINS, dtype=bool)
             first_lit[np.argmax(lit)] = True
             late = np.zeros(BINS, dtype=bool)
             late[2 * BINS // 3 :] = True
-            for variant in VARIANTS:
-                scores, cost = runs[variant.name]
-                ratios = [
-                    relvar_cost(scores, cost, frames) / relvar_cost(base_scores, base_cost, frames)
-                    for frames in (lit, first_lit, late)
-                ]
-                error = np.sqrt(base_var + scores.var(axis=0) / args.paths)
-                deviation = np.max(np.abs(scores.mean(axis=0) - mean)[lit] / error[lit])
+            for variant, m in zip(VARIANTS, runs, strict=True):
+                ratios = [relative_variance(m, core, frames) for frames in (lit, first_lit, late)]
+                error = np.sqrt((core.variance + m.variance) / args.paths)
+                deviation = np.max(np.abs(m.mean - core.mean)[lit] / error[lit])
                 lines.append(
                     f"| {variant.name} | {seed} | {offset:.1f} | {ratios[0]:.3f} | {ratios[1]:.3f} | {ratios[2]:.3f} "
-                    f"| {ratios[0] * base_cost / cost:.3f} | {cost / args.paths:.1f} | {deviation:.1f} |"
+                    f"| {relative_variance(m, core, lit, with_cost=False):.3f} | {m.cost:.1f} | {deviation:.1f} |"
                 )
                 print(lines[-1], flush=True)
     header = (
