@@ -174,7 +174,8 @@ def main() -> None:
     ]
     for row in args.rows:
         cfg = load_config(ROWS[row])
-        tuned_rr = args.tuned_rr or max(1000, cfg.reference.rr_depth or 0)
+        set_rr = cfg.reference.rr_depth if isinstance(cfg.reference.rr_depth, int) else 0
+        tuned_rr = args.tuned_rr or max(1000, set_rr)
         # (roulette depth, tiles) of each baseline; the tiled one renders as the reference does.
         baselines = {"shipped": (5, 0), "tuned": (tuned_rr, 0), "tuned_tiled": (tuned_rr, cfg.reference.tiles)}
         scene_dir = scene_folder(ROWS[row], cfg)
@@ -199,7 +200,7 @@ def main() -> None:
         # The same with the reference's missed noise taken out of every error, where the tiled baseline renders
         # exactly as the reference (same roulette and tiles, all channels at once); NaN otherwise.
         floors = (math.nan, math.nan)
-        if tuned_rr == (cfg.reference.rr_depth or cfg.scene.rr_depth) and not per_channel:
+        if tuned_rr == (set_rr or cfg.scene.rr_depth) and not per_channel:
             tiled = measured["tuned_tiled"]
             floors = (
                 missed_reference_noise(tiled.relmse, tiled.spp, ref.spp, error.reference_noise),

@@ -119,7 +119,8 @@ def reference(scene_dir: Path, cfg, per_channel: bool = False) -> Reference:
             # Keyed only when tiled, so the untiled caches of earlier runs keep their keys.
             **({"tiles": cfg.tiles} if cfg.tiles else {}),
             **({"per_channel": True} if per_channel else {}),
-            "rr_depth": cfg.rr_depth,
+            # An auto depth is keyed by the depth it resolved to; a set one as written, so old caches keep their keys.
+            "rr_depth": scene.rr_depth if cfg.rr_depth == "auto" else cfg.rr_depth,
             "seeds": REFERENCE_SEEDS,
             "mitsuba": mitsuba.__version__,
             "mitransient": mitransient.__version__,

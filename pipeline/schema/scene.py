@@ -390,14 +390,14 @@ class ReferenceConfig(StrictModel):
         description="Wall-clock budget per reference; overrides spp, stopping after the pass that "
         "would overrun it [s].",
     )
-    rr_depth: int | None = Field(
-        None,
-        ge=1,
-        le=100000,
-        description="Depth from which Mitsuba's and mitransient's roulette starts; null = scene.rr_depth. Their "
-        "roulette keeps a path with at most 0.95, so in dense, high-albedo snow set it to hundreds or "
-        "thousands, or the long paths are almost never sampled and the references come out dark "
-        "(render/core/DESIGN.md §12). Roulette does not change what is estimated, only its noise [-].",
+    rr_depth: Annotated[int, Field(ge=1, le=1_000_000)] | Literal["auto"] | None = Field(
+        "auto",
+        description="Depth (collisions) from which Mitsuba's and mitransient's roulette starts. Their roulette keeps "
+        "a path with at most 0.95 a collision, so in dense, high-albedo snow a shallow start leaves the long paths "
+        "almost never sampled and the references dark (1-3 % in fresh snow from 3000). auto: the depth at which "
+        "each medium's channel is expected to leave out at most 0.25 % of its light, from exact half-space "
+        "transport (render/scene/roulette.py; render/core/DESIGN.md §12, *Roulette depth from the medium*); an "
+        "integer sets it (a warning when it is expected to leave out over 0.5 %); null = scene.rr_depth [-].",
     )
     tiles: int = Field(
         4,

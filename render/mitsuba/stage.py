@@ -15,6 +15,14 @@ from render.output.exr import write_exr, write_exr_frames
 from render.output.figures import rendered_image
 from render.output.files import FRAME_UNITS, REFERENCE_TIMING, STEADY, FrameAxis, write_frames
 from render.scene.model import Scene
+from render.scene.roulette import (
+    DARK_WARNING_SHARE,
+    MITSUBA_SURVIVAL_CAP,
+    RouletteDepth,
+    auto_rr_depth,
+    reduced_channels,
+    worst_missed,
+)
 
 log = logging.getLogger(__name__)
 
@@ -28,13 +36,35 @@ class _PassOptions(TypedDict):
     tiles: int
 
 
+def reference_roulette(scene: Scene, cfg: ReferenceConfig) -> tuple[RouletteDepth, str]:
+    """The references' roulette depth for ``scene`` and what it is expected to leave out, with where the depth
+    came from: ``auto`` (chosen from the media), ``reference.rr_depth`` or ``scene.rr_depth``."""
+    media = {name: reduced_channels(m.sigma_s, m.sigma_a, [m.g] * 3) for name, m in scene.media.items()}
+    samples = min(cfg.spp, cfg.transient_spp or cfg.spp)
+    if cfg.rr_depth == "auto":
+        return auto_rr_depth(media, MITSUBA_SURVIVAL_CAP, samples), "auto"
+    depth, source = (scene.rr_depth, "scene.rr_depth") if cfg.rr_depth is None else (cfg.rr_depth, "reference.rr_depth")
+    missed, where = worst_missed(media, depth, MITSUBA_SURVIVAL_CAP, samples)
+    return RouletteDepth(rr_depth=depth, missed=missed, medium=where), source
+
+
+def dark_reference_warning(roulette: RouletteDepth, source: str) -> str | None:
+    """A warning when the depth is expected to leave out more than ``DARK_WARNING_SHARE`` of some light."""
+    if roulette.missed <= DARK_WARNING_SHARE:
+        return None
+    return (
+        f"the references' roulette from collision {roulette.rr_depth} ({source}) is expected to leave out "
+        f"{roulette.missed:.1%} of the light of {roulette.medium}: they will read that much dark. Set "
+        "reference.rr_depth: auto (render/scene/roulette.py)"
+    )
+
+
 def reference_scene(scene_dir: Path, cfg: ReferenceConfig) -> Scene:
-    """The scene folder's scene as the references render it: with ``cfg.rr_depth``, when set, as their own
-    roulette start (it changes their noise, not what they estimate; render/core/DESIGN.md §12), and on a film
-    ``cfg.downsample`` times coarser in each axis."""
+    """The scene folder's scene as the references render it: with the roulette depth of
+    ``reference_roulette`` (it changes their noise and what a finite render misses, not what they estimate;
+    render/core/DESIGN.md §12), and on a film ``cfg.downsample`` times coarser in each axis."""
     scene = Scene.load(Path(scene_dir) / "scene.json")
-    if cfg.rr_depth is not None:
-        scene = dataclasses.replace(scene, rr_depth=cfg.rr_depth)
+    scene = dataclasses.replace(scene, rr_depth=reference_roulette(scene, cfg)[0].rr_depth)
     if cfg.downsample > 1:
         camera, k = scene.camera, cfg.downsample
         if camera.width % k or camera.height % k:
@@ -58,6 +88,17 @@ def run_reference_stage(
     scene = reference_scene(scene_dir, cfg)
     transient = cfg.transient and scene.film.mode == "transient"
     warnings = check_reference_limits(scene, transient=transient, force=cfg.force)
+    roulette, source = reference_roulette(scene, cfg)
+    log.info(
+        "reference: roulette from collision %d (%s), expected to leave out %.2g %% of the light (%s)",
+        roulette.rr_depth,
+        source,
+        100 * roulette.missed,
+        roulette.medium or "no medium",
+    )
+    dark = dark_reference_warning(roulette, source)
+    if dark:
+        warnings.append(dark)
     if cfg.transient and not transient:
         warnings.append("reference.transient is set but scene.film.mode is steady: no transient reference")
     for w in warnings:
@@ -73,6 +114,7 @@ def run_reference_stage(
         "steady": None,
         "transient": None,
         "warnings": warnings,
+        "roulette": {**dataclasses.asdict(roulette), "source": source},
         "camera_leg_included": True,
         "frame_units": FRAME_UNITS["bins"],
         "film": {

@@ -16,6 +16,7 @@ from render.output.agreement import agreement
 from render.output.figures import error_curves
 from render.output.files import RenderOutputs
 from render.output.metrics import RELMSE_EPSILON, box_downsample, downsample_factor, relmse
+from render.scene.roulette import DARK_WARNING_SHARE
 
 log = logging.getLogger(__name__)
 
@@ -127,6 +128,19 @@ def write_table(rows: list[dict[str, Any]], out_dir: Path, stem: str = "comparis
     write_text_atomic(out_dir / f"{stem}.csv", buffer.getvalue())
 
 
+def likely_dark(reference_timing: dict[str, Any]) -> str | None:
+    """What the agreement column adds when the reference's roulette is expected to leave out more than
+    ``DARK_WARNING_SHARE`` of the light (its timing.json's ``roulette``, render/scene/roulette.py)."""
+    roulette = reference_timing.get("roulette") or {}
+    missed = roulette.get("missed", 0.0)
+    if missed <= DARK_WARNING_SHARE:
+        return None
+    return (
+        f"reference likely dark by {missed:.1%} ({roulette.get('medium', '')}; its roulette from collision "
+        f"{roulette.get('rr_depth')}): set reference.rr_depth: auto"
+    )
+
+
 def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: Path) -> dict[str, Any]:
     ours = RenderOutputs.read(ours_dir) if ours_dir else None
     reference = RenderOutputs.read(reference_dir) if reference_dir else None
@@ -155,6 +169,12 @@ def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: 
                 to_bins=ours.axis,
             )
         )
+    dark = likely_dark(ref_timing)
+    if dark:
+        log.warning("compare: %s", dark)
+        for row in rows:
+            if row["agreement"] is not None:
+                row["agreement"] += f"; {dark}"
     for renderer, quantity, image, part in (
         ("Mitsuba volpath", "steady", steady_ref, "steady"),
         ("mitransient", "frames (bins)", frames_ref, "transient"),

@@ -565,3 +565,46 @@ def test_tiles_undo_mitsubas_ray_offsets_in_dense_snow(tmp_path):
     assert images[40.0, 0] > 1.012 * images[40.0, 1]  # measured 1.025 (1.024 at 1024 spp)
     assert images[40.0, 1] == pytest.approx(1.0, abs=0.015)  # measured 0.992 (0.996 at 1024 spp)
     assert images[0.0, 1] == pytest.approx(images[40.0, 1], rel=1e-4)  # a tile does not see where the scene lies
+
+
+# ---------------------------------------------------------------- roulette depth (render/scene/roulette.py)
+
+
+def test_a_shallow_roulette_reads_dark_and_warns_and_auto_does_not(tmp_path):
+    """A dense cube (σ_t 200 per m, albedo 0.9999, isotropic, 200 mean free paths across) lit from above: from
+    collision 200 Mitsuba's roulette (capped at 0.95) almost never samples the paths that return after a few
+    hundred collisions, so the reference reads dark, and the stage says so with the share it expects to miss.
+    ``auto`` starts deep enough to agree with a reference 20x deeper within 0.5 %."""
+    from render.output.compare import likely_dark
+
+    cam = Camera(origin=(0, -2.5, 2.0), target=(0, 0, 0.2), up=(0, 0, 1), fov=35, width=8, height=8)
+    sigma_t, albedo = 200.0, 0.9999
+    make_scene(
+        tmp_path,
+        [("cube", shapes.box_mesh(), {"kind": "null", "interior": "snow"})],
+        camera=cam,
+        lights=[sun((0.0, 0.0, 1.0), (10.0, 10.0, 10.0))],
+        media={"snow": null_medium((sigma_t * albedo,) * 3, (sigma_t * (1 - albedo),) * 3, g=0.0)},
+    )
+    means, timings = {}, {}
+    for label, depth in (("shallow", 200), ("auto", "auto"), ("deep", None)):
+        if depth is None:
+            depth = 20 * timings["auto"]["roulette"]["rr_depth"]
+        cfg = ReferenceConfig(spp=1024, spp_per_pass=256, transient=False, tiles=0, rr_depth=depth)
+        run_reference_stage(tmp_path, cfg, tmp_path / label, seed=1, quiet=True)
+        timings[label] = json.loads((tmp_path / label / "timing.json").read_text())
+        means[label] = float(np.load(tmp_path / label / "steady.npy").mean())
+    expected = timings["shallow"]["roulette"]["missed"]
+    dark = 1.0 - means["shallow"] / means["deep"]
+    print(f"shallow: {dark:.4f} dark, {expected:.4f} expected; auto {timings['auto']['roulette']}")
+    print(f"auto / deep {means['auto'] / means['deep']:.5f}")
+    assert expected > 0.005
+    assert any("expected to leave out" in w and "reference.rr_depth: auto" in w for w in timings["shallow"]["warnings"])
+    assert likely_dark(timings["shallow"]) is not None
+    # The model's sharp cut at the paths' reach is an upper bound on what a finite render misses.
+    assert 0.02 < dark < expected + 0.01
+    assert timings["auto"]["roulette"]["source"] == "auto"
+    assert timings["auto"]["roulette"]["missed"] <= 0.0025
+    assert not any("expected to leave out" in w for w in timings["auto"]["warnings"])
+    assert likely_dark(timings["auto"]) is None
+    assert means["auto"] / means["deep"] == pytest.approx(1.0, abs=0.005)
