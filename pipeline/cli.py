@@ -143,11 +143,12 @@ def run(
         raise typer.Exit(code=2)
     if profile is not None or dry_run:
         from pipeline.shards import run_shards
+        from pipeline.slurm import ClusterError
         from pipeline.sweep import SweepError
 
         try:
             code = run_shards(cfg, config, list(overrides or []), shards, profile, cores, dry_run)
-        except SweepError as exc:
+        except (SweepError, ClusterError) as exc:
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(code=2) from None
         if code != 0:
@@ -239,17 +240,23 @@ def sweep(
 
     Arguments after `--` go to snakemake unchanged, e.g. `-- --forcerun point`.
     """
-    from pipeline.sweep import SweepError, load_sweep, run_sweep
+    from pipeline.slurm import ClusterError
+    from pipeline.sweep import SweepError, load_sweep, points_not_done, run_sweep
 
     setup_logging(quiet=True)
     try:
         spec = load_sweep(sweep_file)
         code = run_sweep(spec, cores=cores, profile=profile, dry_run=dry_run, extra=list(ctx.args))
-    except SweepError as exc:
+    except (SweepError, ClusterError) as exc:
         typer.echo("\n".join(f"error: {line}" for line in str(exc).splitlines()), err=True)
         raise typer.Exit(code=2) from None
     if code != 0:
-        typer.echo(f"error: snakemake failed (exit {code}); each point's log is in {spec.folder / 'logs'}/", err=True)
+        missing = points_not_done(spec)
+        not_run = f"points not run: {', '.join(missing)}; a rerun runs only those" if missing else "every point ran"
+        typer.echo(
+            f"error: snakemake failed (exit {code}); {not_run}; each point's log is in {spec.folder / 'logs'}/",
+            err=True,
+        )
         raise typer.Exit(code=code)
     if not dry_run:
         typer.echo(

@@ -11,19 +11,18 @@ Without --profile, `pipeline run --shards K` renders the shards one after anothe
 from __future__ import annotations
 
 import importlib.util
-import logging
-import subprocess
 import sys
 from pathlib import Path
 
 import yaml
 
 from pipeline.runner import run_dir, shards_dir
-from pipeline.sweep import SweepError, snakemake_command, write_if_changed
-
-log = logging.getLogger(__name__)
+from pipeline.sweep import SweepError, run_workflow, snakemake_command, write_if_changed
 
 SHARDS_SNAKEFILE = Path(__file__).resolve().parent / "workflow" / "shards.smk"
+# The shard rule's own resources (shards.smk reads them from the workflow config); a profile's
+# set-resources wins. Memory in MB, runtime in minutes.
+SHARD_RESOURCES = {"mem_mb": 8000, "runtime": 120}
 
 
 def prepare_shards(config, config_path: Path, overrides: list[str], shards: int, workdir: Path | None = None) -> Path:
@@ -44,6 +43,7 @@ def prepare_shards(config, config_path: Path, overrides: list[str], shards: int,
         "overrides": list(overrides),
         "shards": shards,
         "threads": config.threads or 1,
+        "resources": {"shard": SHARD_RESOURCES},
         "prepare_stages": before_render,
         "prepared": str(base / "scene" / "manifest.json"),  # the scene stage always runs before the render
         "shards_dir": str(shards_dir(base, "render")),
@@ -72,5 +72,7 @@ def run_shards(
         raise SweepError("snakemake is not installed in this environment; install requirements.lock into it")
     workflow_yaml = prepare_shards(config, config_path, overrides, shards)
     command = snakemake_command(workflow_yaml, cores, profile, dry_run, snakefile=SHARDS_SNAKEFILE)
-    log.info("running %s", " ".join(command))
-    return subprocess.run(command, check=False).returncode
+    threads = config.threads or 1
+    return run_workflow(
+        command, profile, {"shard": {"threads": threads, **SHARD_RESOURCES}, "merge": {"threads": threads}}, dry_run
+    )

@@ -67,6 +67,9 @@ PROFILES_DIR = PROJECT_ROOT / "profiles"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
 MAX_POINT_NAME = 80  # characters of a point name
 # Keys the sweep itself decides for every point.
+# The point rule's own resources (rules/point.smk reads them from the workflow config); a profile's
+# set-resources wins. Memory in MB, runtime in minutes.
+POINT_RESOURCES = {"mem_mb": 4000, "runtime": 60}
 RESERVED_KEYS = {
     "name": "the sweep names each run '<sweep>-<point>'",
     "threads": "threads come from the sweep's 'threads' key (or Snakemake's set-threads)",
@@ -427,6 +430,7 @@ def prepare(sweep: Sweep, workdir: Path | None = None) -> Path:
         "runs_dir": str((workdir / sweep.runs_dir).resolve()),
         "python": sys.executable,
         "threads": sweep.threads,
+        "resources": {"point": POINT_RESOURCES},
         "target_stage": target_stage(sweep),
         "ground_truth": sweep.ground_truth,
         "common": list(sweep.common),
@@ -500,5 +504,26 @@ def run_sweep(
         raise SweepError("snakemake is not installed in this environment; install requirements.lock into it")
     workflow_yaml = prepare(sweep)
     command = snakemake_command(workflow_yaml, cores, profile, dry_run, extra)
+    return run_workflow(command, profile, {"point": {"threads": sweep.threads, **POINT_RESOURCES}}, dry_run)
+
+
+def run_workflow(command: list[str], profile: str | None, rules: dict[str, dict[str, int]], dry_run: bool) -> int:
+    """Run a snakemake command; through a SLURM profile only after the cluster checks, and watched.
+
+    ``rules``: each rule that goes to the cluster -> its own {threads, mem_mb}."""
+    from pipeline.slurm import Watch, check_profile, profile_settings, uses_slurm
+
+    profile_dir = resolve_profile(profile)
     log.info("running %s", " ".join(command))
-    return subprocess.run(command, check=False).returncode
+    if dry_run or not uses_slurm(profile_settings(profile_dir)):
+        return subprocess.run(command, check=False).returncode
+    check_profile(profile_dir, rules)
+    return Watch(Path(command[command.index("--directory") + 1])).run(command)
+
+
+def points_not_done(sweep: Sweep) -> list[str]:
+    """The points whose last stage has no manifest (relative runs_dir from the working directory)."""
+    from pipeline.runner import run_dir
+
+    stage = target_stage(sweep)
+    return [p.name for p in sweep.points if not (run_dir(p.config) / stage / "manifest.json").is_file()]

@@ -46,9 +46,9 @@ rule shard:
     log:
         f"{config['folder']}/logs/shard-{{index}}.log",
     threads: config["threads"]
-    resources:
-        mem_mb=8000,
-        runtime=120,
+    resources:  # SHARD_RESOURCES in pipeline/shards.py, where the SLURM checks read them too
+        mem_mb=config["resources"]["shard"]["mem_mb"],
+        runtime=config["resources"]["shard"]["runtime"],
     shell:
         "cd {config[workdir]:q} && {config[python]:q} -m pipeline shard {config[config]:q} {SETS} --quiet"
         " --index {wildcards.index} --shards {SHARDS} --set threads={threads} > {log:q} 2>&1"

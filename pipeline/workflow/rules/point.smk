@@ -12,9 +12,9 @@ rule point:
     # The C++ core gets exactly the threads Snakemake grants (`--set threads`); set-threads in a
     # profile overrides the sweep's `threads`, and --cores below it scales it down.
     threads: config["threads"]
-    resources:
-        mem_mb=4000,
-        runtime=60,
+    resources:  # POINT_RESOURCES in pipeline/sweep.py, where the SLURM checks read them too
+        mem_mb=config["resources"]["point"]["mem_mb"],
+        runtime=config["resources"]["point"]["runtime"],
     params:
         workdir=WORKDIR,
         python=PYTHON,
