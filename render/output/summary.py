@@ -27,6 +27,7 @@ from render.output.figures import error_curves, poster_grid
 from render.output.files import RenderOutputs
 from render.output.metrics import relmse
 from render.output.report import html_page, markdown_table_to_html
+from render.scene.roulette import DARK_WARNING_SHARE
 
 log = logging.getLogger(__name__)
 
@@ -140,6 +141,18 @@ def _point_row(
     extras = {"steady_timing": steady_timing, "transient_timing": transient_timing}
     row["reference_steady_s"] = _number(steady_timing.get("seconds"))
     row["reference_transient_s"] = _number(transient_timing.get("seconds"))
+    # The share of light the reference's roulette is expected to leave out (render/scene/roulette.py).
+    roulette = timing.get("roulette") or {}
+    row["reference_rr_depth"] = roulette.get("rr_depth")
+    row["reference_missed_share"] = _number(roulette.get("missed"))
+    if (row["reference_missed_share"] or 0.0) > DARK_WARNING_SHARE:
+        log.warning(
+            "sweep summary: point '%s': its reference is likely %.1f %% dark (roulette from collision %s); "
+            "set reference.rr_depth: auto",
+            name,
+            100 * row["reference_missed_share"],
+            row["reference_rr_depth"],
+        )
     if truth is None:
         row.update(_compare_errors(files))
     else:

@@ -3,7 +3,9 @@ through the stage runner, does nothing the second time and re-runs only a change
 
 from __future__ import annotations
 
+import csv
 import importlib.util
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -132,6 +134,25 @@ def test_summary_of_points_with_missing_files_has_empty_cells(tmp_path, base, mo
     assert len(rows) == 4 and rows[1].startswith("set1,thesis_set_1,")
     assert "is missing; its cells stay empty" in caplog.text
     assert paths["poster"].is_file() and paths["report"].is_file() and "error_plot" not in paths
+
+
+def test_summary_flags_a_point_whose_reference_is_likely_dark(tmp_path, base, monkeypatch, caplog):
+    """The reference stage records the share of light its roulette is expected to leave out (timing.json's
+    ``roulette``); the summary tabulates it and warns past 0.5 % (render/scene/roulette.py)."""
+    monkeypatch.chdir(tmp_path)
+    text = TINY_SWEEP.format(runs=tmp_path / "runs", firn="penitente_firn")
+    text = text.replace("set: {runs_dir:", "set: {reference.steady: true, runs_dir:")
+    spec = prepare(load_sweep(write(tmp_path / "s.yaml", text)))
+    for point, (depth, missed) in {"set1": (27, 0.0024), "firn": (3000, 0.0072)}.items():
+        folder = tmp_path / "runs" / f"s-{point}" / "reference"
+        folder.mkdir(parents=True)
+        roulette = {"rr_depth": depth, "missed": missed, "medium": "snow (B)", "source": "reference.rr_depth"}
+        (folder / "timing.json").write_text(json.dumps({"steady": None, "transient": None, "roulette": roulette}))
+    write_summary(spec)
+    rows = {r["point"]: r for r in csv.DictReader((tmp_path / "runs" / "sweeps" / "s" / "summary.csv").open())}
+    assert float(rows["firn"]["reference_missed_share"]) == 0.0072 and rows["firn"]["reference_rr_depth"] == "3000"
+    assert "point 'firn': its reference is likely 0.7 % dark (roulette from collision 3000)" in caplog.text
+    assert "point 'set1': its reference is likely" not in caplog.text
 
 
 # ---------------------------------------------------------------- the workflow end to end
