@@ -129,7 +129,7 @@ def row_spacing(h: np.ndarray, spacing: float) -> float:
     return _peak_wavelength(k, power, 2)
 
 
-def _mean_crossing_stretches(profile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def mean_crossing_stretches(profile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Crests (highest point of each stretch above the profile's mean) and troughs (lowest of each
     stretch below it) of one periodic profile, as deviations from its mean [m]."""
     deviation = profile - profile.mean()
@@ -156,7 +156,7 @@ def crest_to_trough(h: np.ndarray, axis: int = 0) -> float:
     """
     heights = [
         crests.mean() - troughs.mean()
-        for crests, troughs in map(_mean_crossing_stretches, _transects(h, axis))
+        for crests, troughs in map(mean_crossing_stretches, _transects(h, axis))
         if crests.size
     ]
     return float(np.mean(heights)) if heights else 0.0
@@ -166,7 +166,7 @@ def crest_spacing(h: np.ndarray, spacing: float, axis: int = 0) -> float:
     """Mean distance between successive crests along the transects of ``axis`` (0: north-south) [m]:
     transect length over its number of crests (as in crest_to_trough). A check on row_spacing that
     needs no spectral peak; it is inf where no transect crosses its mean."""
-    counts = [crests.size for crests, _ in map(_mean_crossing_stretches, _transects(h, axis))]
+    counts = [crests.size for crests, _ in map(mean_crossing_stretches, _transects(h, axis))]
     mean_count = float(np.mean(counts))
     return h.shape[axis] * spacing / mean_count if mean_count > 0 else float("inf")
 

@@ -4,6 +4,7 @@ and a time-lapse MP4 of the growth. All files are written atomically."""
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -66,11 +67,11 @@ def save_metrics_plot(
     ax.plot(history["day"], history["crest_spacing_m"], label="crest spacing λ_dom")
     ax.set_xlabel("day")
     ax.set_ylabel("[m]")
-    ax.legend(loc="upper left")
     density = ax.twinx()
     density.plot(history["day"], history["crest_density_per_m2"], color="k", ls=":", label="crests per m²")
     density.set_ylabel("crests per m² (dotted)")
-    ax.set_title("the season: forms coarsen and deepen")
+    _shade_stages(ax, history)
+    ax.set_title("the season: forms coarsen and deepen; shaded: the stage")
     ax = fig.add_subplot(2, 2, 2)
     k, power = metrics.transect_power_spectrum(h, spacing, axis=0)
     ax.loglog(2 * np.pi / k[1:], power[1:], label="N–S transects")
@@ -105,6 +106,20 @@ def save_metrics_plot(
     fig.tight_layout()
     _figure_to_file(fig, path, dpi=90)
     plt.close(fig)
+
+
+STAGE_COLOURS = {"pitted": "0.85", "suncups": "#f3d9a4", "penitentes": "#a9c8ec"}
+
+
+def _shade_stages(ax, history: dict) -> None:
+    """Shade each stretch between snapshots by the stage of its later snapshot (morphology.stage_label)."""
+    days, stages = history["day"], history.get("stage", [])
+    for start, end, stage in zip(days[:-1], days[1:], stages[1:]):
+        ax.axvspan(start, end, color=STAGE_COLOURS.get(stage, "w"), alpha=0.6, lw=0, zorder=0)
+    for stage, colour in STAGE_COLOURS.items():
+        if stage in stages:
+            ax.axvspan(0, 0, color=colour, alpha=0.6, lw=0, label=stage)
+    ax.legend(loc="upper left", fontsize="small")
 
 
 def render_preview(path: Path, mesh: TriangleMesh, sun: np.ndarray, width_px: int, title: str) -> None:
@@ -142,9 +157,16 @@ def render_preview(path: Path, mesh: TriangleMesh, sun: np.ndarray, width_px: in
 
 
 def save_timelapse(
-    path: Path, snapshots: np.ndarray, snapshot_days: np.ndarray, spacing: float, fps: int, width_px: int = 640
+    path: Path,
+    snapshots: np.ndarray,
+    snapshot_days: np.ndarray,
+    spacing: float,
+    fps: int,
+    width_px: int = 640,
+    stages: Sequence[str] | None = None,
 ) -> None:
-    """H.264 MP4 of the field growing: hillshade + height colour per snapshot, with the day burned in."""
+    """H.264 MP4 of the field growing: hillshade + height colour per snapshot, with the day and, if given, the
+    stage of each snapshot (morphology.stage_label) burned in."""
     import av
     import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -164,11 +186,12 @@ def save_timelapse(
         stream.options = {"crf": "23"}
         dpi = width_px / size_in
         frames = []
-        for h, day in zip(snapshots, snapshot_days):
+        for i, (h, day) in enumerate(zip(snapshots, snapshot_days)):
             ax.clear()
             ax.imshow(hillshade(h, spacing), cmap="gray", origin="lower", extent=extent, vmin=0, vmax=1)
             ax.imshow(h - h.mean(), cmap="terrain", origin="lower", extent=extent, alpha=0.35, vmin=lo, vmax=hi)
-            ax.set_title(f"day {day:.0f}   relief {2 * np.sqrt(2) * h.std():.2f} m")
+            stage = f"   {stages[i]}" if stages is not None else ""
+            ax.set_title(f"day {day:.0f}   relief {2 * np.sqrt(2) * h.std():.2f} m{stage}")
             ax.set_xlabel("x, east [m]")
             ax.set_ylabel("y, north [m]")
             fig.set_dpi(dpi)

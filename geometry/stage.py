@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from geometry import ablation, irradiance, mesh, metrics, preview, sunpath
+from geometry import ablation, irradiance, mesh, metrics, morphology, preview, sunpath
 from pipeline.atomic import atomic_path, write_json_atomic
 from pipeline.schema.geometry import GeometryConfig
 
@@ -40,11 +40,12 @@ def noon_radiation_metrics(h: np.ndarray, spacing: float, cfg: GeometryConfig, d
 
 
 def field_metrics(grown: ablation.GrowthResult, cfg: GeometryConfig) -> dict:
-    """The grown field's shape (crests counted once within metrics.crest_radius), its lean toward the
+    """The grown field's shape (crests counted once within metrics.crest_radius) and stage, its lean toward the
     equator against the noon zenith angles, and its noon radiation (V3, V4; DESIGN.md 7)."""
     h, spacing = grown.height, grown.spacing
     last_day = cfg.start_day_of_year + cfg.days - 1
     out = metrics.morphology(h, spacing, metrics.crest_radius(cfg.optical_efolding_depth))
+    out.update(morphology.stage_metrics(h, spacing))
     delta = float(sunpath.declination(last_day))
     out["noon_zenith_angle_deg"] = float(np.degrees(sunpath.noon_zenith_angle(cfg.latitude, delta)))
     out["noon_zenith_growth_weighted_deg"] = float(
@@ -117,7 +118,11 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
     t = time.perf_counter()
     summary_metrics = field_metrics(grown, cfg)
     radius = metrics.crest_radius(cfg.optical_efolding_depth)
-    history = {"day": grown.snapshot_days.tolist(), **metrics.season_history(grown.snapshots, spacing, radius)}
+    history = {
+        "day": grown.snapshot_days.tolist(),
+        **metrics.season_history(grown.snapshots, spacing, radius),
+        **morphology.stage_history(grown.snapshots, spacing),
+    }
     aspects = metrics.aspect_table(h, spacing)
     summary_metrics.update(
         {
@@ -152,7 +157,14 @@ def run_geometry_stage(cfg: GeometryConfig, out_dir: Path, *, seed: int, quiet: 
         cfg.preview_size,
         f"penitentes, {cfg.latitude:.1f}° lat, day {cfg.days}; arrow: noon sun",
     )
-    preview.save_timelapse(out_dir / "timelapse.mp4", grown.snapshots, grown.snapshot_days, spacing, cfg.timelapse_fps)
+    preview.save_timelapse(
+        out_dir / "timelapse.mp4",
+        grown.snapshots,
+        grown.snapshot_days,
+        spacing,
+        cfg.timelapse_fps,
+        stages=history["stage"],
+    )
     timings["pictures_s"] = time.perf_counter() - t
     timings["total_s"] = time.perf_counter() - t0
     write_json_atomic(
