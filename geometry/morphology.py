@@ -11,9 +11,9 @@ from geometry import irradiance, metrics
 
 # Thresholds of stage_label, justified in DESIGN.md 7, *Stages*, from the demo's fields on days 0-120.
 PITTED_MIN_SPACING_TO_HEIGHT = 3.0  # forms shallower than a third of their spacing are pits in a flat surface
-PITTED_MAX_SKEWNESS = -0.5  # or pits cut into a plateau: a long tail of low heights ...
+PITTED_MAX_SKEWNESS = -1.0  # or pits cut into a plateau: a long tail of low heights ...
 PITTED_MIN_UPPER_THIRD = 0.5  # ... with most of the ground still in the top third of the range
-PENITENTE_MAX_CONNECTIVITY = 0.5  # the top third falls apart into separate blades and rows
+PENITENTE_MAX_CONNECTIVITY = 0.6  # the top third falls apart into separate blades and rows
 NEAR_FLAT_DEG = 15.0
 STAGES = ("pitted", "suncups", "penitentes")
 
@@ -112,8 +112,8 @@ def half_height_width_ratio(h: np.ndarray) -> float:
 
 def stage_label(spacing_to_height: float, skewness: float, upper_third_fraction: float, connectivity: float) -> str:
     """pitted, suncups or penitentes (DESIGN.md 7, *Stages*). Pitted: shallow forms (crest spacing over crest to
-    trough above 3), or pits in a plateau (skewness below -0.5 with over half the ground in the top third).
-    Penitentes: the top third in separate parts (its largest part under half of it). Suncups: deep hollows in
+    trough above 3), or pits in a plateau (skewness below -1 with over half the ground in the top third).
+    Penitentes: the top third in separate parts (its largest part under 60 % of it). Suncups: deep hollows in
     one connected high ground."""
     shallow = spacing_to_height > PITTED_MIN_SPACING_TO_HEIGHT
     if shallow or (skewness < PITTED_MAX_SKEWNESS and upper_third_fraction > PITTED_MIN_UPPER_THIRD):
