@@ -7,7 +7,9 @@ cluster conditions would make a sweep wait forever without a word, so they are c
 - a job that asks more CPUs or memory than any node has pends forever (reason PartitionConfig):
   `check_profile` refuses it before submitting, naming the profile key to lower;
 - without accounting (slurmdbd) sacct fails and the plugin keeps polling: `check_profile` refuses,
-  naming the plugin's setting that works without it (``slurm-status-command: squeue``);
+  naming the plugin's setting that works without it (``slurm-status-command: squeue``, which the
+  project's profile sets: plugin 2.8.0 reads sacct's ``CANCELLED by <uid>`` as still running, so a
+  cancelled job would hang the workflow; squeue says ``CANCELLED`` and the retry runs);
 - with every node of its partition down or drained, a pending job never starts: `Watch` cancels the
   workflow's pending jobs once no node has taken jobs for ``PIPELINE_SLURM_NODES_GRACE_S`` seconds
   (default 120); Snakemake then fails those jobs and the caller names what did not run.
@@ -21,6 +23,7 @@ import logging
 import os
 import re
 import shutil
+import signal
 import subprocess
 import time
 from dataclasses import dataclass, field
@@ -167,22 +170,31 @@ def _min_job_age_s() -> int | None:
     return int(match.group(1)) if match else None
 
 
-def _accounting_problem(settings: dict[str, Any], where: str) -> str | None:
-    """Why the plugin could not follow its jobs here, or None: it polls sacct unless told to use squeue."""
+def _status_problem(settings: dict[str, Any], where: str) -> str | None:
+    """Why the plugin could not follow its jobs here, or None.
+
+    With ``slurm-status-command: squeue`` it reads squeue, which keeps a finished job for MinJobAge
+    seconds; below 3 x its first wait it polls sacct instead, which needs accounting (slurmdbd)."""
     result = _run(["sacct", "--allocations", "--noheader", "--format=JobID", "--starttime=now"])
-    if result.returncode == 0:
-        return None
+    accounting = result.returncode == 0
     init_s = _as_int(settings.get("slurm-init-seconds-before-status-checks")) or PLUGIN_INIT_S
     min_job_age = _min_job_age_s()
     if settings.get("slurm-status-command") == "squeue":
         if min_job_age is not None and min_job_age >= 3 * init_s:
+            if not accounting:
+                log.warning(
+                    "slurm: SLURM accounting is unavailable (sacct: %s); jobs are followed with squeue "
+                    "(slurm-status-command: squeue), which needs none",
+                    _first_error(result),
+                )
             return None
-        # Below that the plugin falls back to sacct, which has nothing to answer with.
         return (
             f"{where}: slurm-status-command: squeue needs MinJobAge >= 3 x slurm-init-seconds-before-status-checks"
-            f" = {3 * init_s} s, and this cluster's MinJobAge is {min_job_age} s: lower"
-            f" slurm-init-seconds-before-status-checks to {(min_job_age or 0) // 3} or less"
+            f" = {3 * init_s} s, and this cluster's MinJobAge is {min_job_age} s (below it the plugin polls sacct"
+            f" instead): lower slurm-init-seconds-before-status-checks to {(min_job_age or 0) // 3} or less"
         )
+    if accounting:
+        return None
     return (
         f"{where}: SLURM accounting is unavailable (sacct: {_first_error(result)}), and the SLURM executor polls "
         "job states with sacct, so it would wait forever: start slurmdbd, or set slurm-status-command: squeue in the "
@@ -210,7 +222,7 @@ def check_profile(profile_dir: Path, rules: dict[str, dict[str, int]]) -> None:
             problem = _oversized(request, cluster_nodes(request.partition), where)
             if problem:
                 raise ClusterError(problem)
-        problem = _accounting_problem(settings, where)
+        problem = _status_problem(settings, where)
     except subprocess.TimeoutExpired as exc:
         raise ClusterError(f"{where}: {exc.cmd[0]} did not answer in {COMMAND_TIMEOUT_S} s: is slurmctld up?") from None
     if problem:
@@ -218,6 +230,10 @@ def check_profile(profile_dir: Path, rules: dict[str, dict[str, int]]) -> None:
 
 
 # ---------------------------------------------------------------- while the workflow runs
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt  # so that Watch.run stops Snakemake, which cancels its jobs
 
 
 @dataclass
@@ -234,6 +250,7 @@ class Watch:
     def run(self, command: list[str]) -> int:
         """Run ``command`` (Snakemake) to its end, looking at the queue every few seconds; its exit code."""
         process = subprocess.Popen(command)
+        previous = signal.signal(signal.SIGTERM, _interrupt)
         try:
             while True:
                 try:
@@ -241,6 +258,7 @@ class Watch:
                 except subprocess.TimeoutExpired:
                     self.look()
         finally:
+            signal.signal(signal.SIGTERM, previous)
             if process.poll() is None:  # interrupted: Snakemake cancels its jobs on SIGTERM
                 process.terminate()
                 process.wait()

@@ -294,22 +294,25 @@ def test_a_job_larger_than_any_node_is_refused_before_submitting(tmp_path, resou
     assert workflow_jobs(tmp_path / "runs" / "sweeps" / "box") == []
 
 
-def test_without_accounting_the_sweep_refuses_and_the_named_setting_works(tmp_path):
+def test_without_accounting_a_sacct_profile_is_refused_and_the_shipped_one_runs(tmp_path):
     sweep_file = box_sweep(tmp_path, ["a", "b"], paths_per_iteration=1000)
     subprocess.run([CLUSTER_SCRIPT, "dbd-stop"], check=True)
     try:
         started = time.monotonic()
-        refused = pipeline("sweep", sweep_file, "--profile", sized_profile(tmp_path / "p"), cwd=tmp_path, timeout=60)
+        profile = sized_profile(tmp_path / "sacct", slurm_status_command="sacct")
+        refused = pipeline("sweep", sweep_file, "--profile", profile, cwd=tmp_path, timeout=60)
         print(refused.stderr)
         assert refused.returncode == 2 and time.monotonic() - started < 30
         lines = refused.stderr.strip().splitlines()
         assert len(lines) == 1 and "SLURM accounting is unavailable (sacct: " in lines[0]
         assert "set slurm-status-command: squeue" in lines[0]
         assert not (tmp_path / "runs" / "box-a").exists()
-        # The setting the line names: the plugin follows its jobs with squeue, and the sweep finishes.
-        profile = sized_profile(tmp_path / "squeue", slurm_status_command="squeue")
-        ran = pipeline("sweep", sweep_file, "--profile", profile, cwd=tmp_path, timeout=300)
+        # The shipped profile follows its jobs with squeue: it says so in one line and finishes.
+        ran = pipeline("sweep", sweep_file, "--profile", sized_profile(tmp_path / "squeue"), cwd=tmp_path, timeout=300)
         assert ran.returncode == 0, tail(ran)
+        notice = [line for line in (ran.stdout + ran.stderr).splitlines() if "accounting is unavailable" in line]
+        print("\n".join(notice))
+        assert len(notice) == 1 and "jobs are followed with squeue (slurm-status-command: squeue)" in notice[0]
         assert len(summary_rows(tmp_path / "runs" / "sweeps" / "box" / "summary.csv")) == 2
     finally:
         subprocess.run([CLUSTER_SCRIPT, "dbd-start"], check=True)
