@@ -28,7 +28,7 @@ PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find pipeline geometry
 
 CORE_FORMATTED := $(shell find render/core -name '*.cpp' -o -name '*.hpp')
 
-.PHONY: help setup demo poster video lint test test-all test-cpp test-py bench convergence sweep sanitize clean distclean
+.PHONY: help setup demo poster video lint test test-all test-cpp test-py cluster-test bench convergence sweep sanitize clean distclean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  make %-10s %s\n", $$1, $$2}'
@@ -63,6 +63,15 @@ test: setup ## Lint, then the C++ tests (ctest) and the Python tests (pytest), e
 test-all: setup ## Run every test, the slow ones included
 	$(MAKE) test-cpp
 	$(PY) -m pytest $(PYTEST_ARGS)
+
+# A one-node SLURM cluster with accounting on localhost (as root): tests/cluster/slurm_cluster.sh installs
+# slurm-wlm, slurmdbd, munge and MariaDB, starts them, and on exit (pass or fail) stops them and purges what
+# it installed, so nothing runs or starts at boot afterwards. KEEP_PACKAGES=1 keeps the packages (disabled).
+CLUSTER := tests/cluster/slurm_cluster.sh
+
+cluster-test: setup ## Sweeps, shards and faults through a real one-node SLURM cluster (root, ~5 min; KEEP_PACKAGES=1)
+	trap '$(CLUSTER) $(if $(KEEP_PACKAGES),down,purge)' EXIT; \
+	  $(CLUSTER) install && $(CLUSTER) up && $(PY) -m pytest tests/cluster -m cluster -v $(PYTEST_ARGS)
 
 test-cpp: $(STAMPS)/venv
 	cmake -S render/core -B build/ctest -G Ninja -DCMAKE_BUILD_TYPE=Release -DPTPB_BUILD_TESTS=ON > build-ctest.log 2>&1 || (cat build-ctest.log; exit 1)
