@@ -71,7 +71,7 @@ CLUSTER := tests/cluster/slurm_cluster.sh
 
 cluster-test: setup ## Sweeps, shards and faults through a real one-node SLURM cluster (root, ~5 min; KEEP_PACKAGES=1)
 	trap '$(CLUSTER) $(if $(KEEP_PACKAGES),down,purge)' EXIT; \
-	  $(CLUSTER) install && $(CLUSTER) up && $(PY) -m pytest tests/cluster -m cluster -v $(PYTEST_ARGS)
+	  $(CLUSTER) install && $(CLUSTER) up && $(PY) -m pytest tests/cluster -m cluster -v -rP $(PYTEST_ARGS)
 
 test-cpp: $(STAMPS)/venv
 	cmake -S render/core -B build/ctest -G Ninja -DCMAKE_BUILD_TYPE=Release -DPTPB_BUILD_TESTS=ON > build-ctest.log 2>&1 || (cat build-ctest.log; exit 1)
