@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from geometry import irradiance, metrics
+from geometry import irradiance, metrics, morphology
 from geometry.mesh import TriangleMesh
 from pipeline.atomic import atomic_path
 
@@ -108,7 +108,7 @@ def save_metrics_plot(
     plt.close(fig)
 
 
-STAGE_COLOURS = {"pitted": "0.85", "suncups": "#f3d9a4", "penitentes": "#a9c8ec"}
+STAGE_COLOURS = dict(zip(morphology.STAGES, ("0.85", "#f3d9a4", "#a9c8ec")))  # pitted, suncups, penitentes
 
 
 def _shade_stages(ax, history: dict) -> None:
