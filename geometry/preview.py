@@ -71,6 +71,7 @@ def save_metrics_plot(
     density.plot(history["day"], history["crest_density_per_m2"], color="k", ls=":", label="crests per m²")
     density.set_ylabel("crests per m² (dotted)")
     _shade_stages(ax, history)
+    ax.legend(loc="upper left", fontsize="small")
     ax.set_title("the season: forms coarsen and deepen; shaded: the stage")
     ax = fig.add_subplot(2, 2, 2)
     k, power = metrics.transect_power_spectrum(h, spacing, axis=0)
@@ -112,14 +113,17 @@ STAGE_COLOURS = dict(zip(morphology.STAGES, ("0.85", "#f3d9a4", "#a9c8ec")))  # 
 
 
 def _shade_stages(ax, history: dict) -> None:
-    """Shade each stretch between snapshots by the stage of its later snapshot (morphology.stage_label)."""
-    days, stages = history["day"], history.get("stage", [])
-    for start, end, stage in zip(days[:-1], days[1:], stages[1:]):
+    """Shade each snapshot's day, from halfway to the one before to halfway to the one after, by its stage
+    (morphology.stage_label)."""
+    days, stages = np.asarray(history["day"], float), history.get("stage", [])
+    if len(days) < 2 or len(stages) != len(days):
+        return
+    edges = np.concatenate(([days[0]], 0.5 * (days[:-1] + days[1:]), [days[-1]]))
+    for start, end, stage in zip(edges[:-1], edges[1:], stages):
         ax.axvspan(start, end, color=STAGE_COLOURS.get(stage, "w"), alpha=0.6, lw=0, zorder=0)
     for stage, colour in STAGE_COLOURS.items():
         if stage in stages:
             ax.axvspan(0, 0, color=colour, alpha=0.6, lw=0, label=stage)
-    ax.legend(loc="upper left", fontsize="small")
 
 
 def render_preview(path: Path, mesh: TriangleMesh, sun: np.ndarray, width_px: int, title: str) -> None:
