@@ -69,7 +69,7 @@ test-all: setup ## Run every test, the slow ones included
 # it installed, so nothing runs or starts at boot afterwards. KEEP_PACKAGES=1 keeps the packages (disabled).
 CLUSTER := tests/cluster/slurm_cluster.sh
 
-cluster-test: setup ## Sweeps, shards and faults through a real one-node SLURM cluster (root, ~5 min; KEEP_PACKAGES=1)
+cluster-test: setup ## Sweeps, shards and faults through a real one-node SLURM cluster (as root, under 10 min; KEEP_PACKAGES=1)
 	trap '$(CLUSTER) $(if $(KEEP_PACKAGES),down,purge)' EXIT; \
 	  $(CLUSTER) install && $(CLUSTER) up && $(PY) -m pytest tests/cluster -m cluster -v -rP $(PYTEST_ARGS)
 
