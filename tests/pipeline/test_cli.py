@@ -22,6 +22,9 @@ def tiny_config(tmp_path):
         "extends: [presets/sites/tapado.yaml]\n"
         f"runs_dir: {tmp_path / 'runs'}\n"
         "geometry:\n  grid_cells: 64\n  days: 1\n  snapshots: 2\n  preview_size: 128\n"
+        # The references of the default firn start their roulette at 20000 collisions (reference.rr_depth: auto),
+        # minutes of path tracing that these tests of the stage runner do not need.
+        "reference:\n  steady: false\n  transient: false\n"
     )
     return path
 
