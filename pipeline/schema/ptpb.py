@@ -115,7 +115,8 @@ class PTPBConfig(StrictModel):
         gt=0,
         lt=1,
         description="Russian roulette of path-traced camera paths keeps a path with min(this, throughput); dense, "
-        "high-albedo media need values near 1 so that paths of hundreds of collisions are not cut (DESIGN.md §12) [-].",
+        "high-albedo media need values near 1 so that paths of hundreds of collisions are not cut. 0.999 agrees with "
+        "the auto-depth reference within 1 % in fresh snow, the highest albedo of any preset (DESIGN.md §12) [-].",
     )
     path_splits: int = Field(
         0,
