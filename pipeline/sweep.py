@@ -66,10 +66,10 @@ SNAKEFILE = Path(__file__).resolve().parent / "workflow" / "Snakefile"
 PROFILES_DIR = PROJECT_ROOT / "profiles"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
 MAX_POINT_NAME = 80  # characters of a point name
-# Keys the sweep itself decides for every point.
 # The point rule's own resources (rules/point.smk reads them from the workflow config); a profile's
 # set-resources wins. Memory in MB, runtime in minutes.
 POINT_RESOURCES = {"mem_mb": 4000, "runtime": 60}
+# Keys the sweep itself decides for every point.
 RESERVED_KEYS = {
     "name": "the sweep names each run '<sweep>-<point>'",
     "threads": "threads come from the sweep's 'threads' key (or Snakemake's set-threads)",

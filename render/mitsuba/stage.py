@@ -16,10 +16,10 @@ from render.output.figures import rendered_image
 from render.output.files import FRAME_UNITS, REFERENCE_TIMING, STEADY, FrameAxis, write_frames
 from render.scene.model import Scene
 from render.scene.roulette import (
-    DARK_WARNING_SHARE,
     MITSUBA_SURVIVAL_CAP,
     RouletteDepth,
     auto_rr_depth,
+    dark_reference,
     reduced_channels,
     worst_missed,
 )
@@ -48,23 +48,18 @@ def reference_roulette(scene: Scene, cfg: ReferenceConfig) -> tuple[RouletteDept
     return RouletteDepth(rr_depth=depth, missed=missed, medium=where), source
 
 
-def dark_reference_warning(roulette: RouletteDepth, source: str) -> str | None:
-    """A warning when the depth is expected to leave out more than ``DARK_WARNING_SHARE`` of some light."""
-    if roulette.missed <= DARK_WARNING_SHARE:
-        return None
-    return (
-        f"the references' roulette from collision {roulette.rr_depth} ({source}) is expected to leave out "
-        f"{roulette.missed:.1%} of the light of {roulette.medium}: they will read that much dark. Set "
-        "reference.rr_depth: auto (render/scene/roulette.py)"
-    )
-
-
 def reference_scene(scene_dir: Path, cfg: ReferenceConfig) -> Scene:
-    """The scene folder's scene as the references render it: with the roulette depth of
-    ``reference_roulette`` (it changes their noise and what a finite render misses, not what they estimate;
-    render/core/DESIGN.md §12), and on a film ``cfg.downsample`` times coarser in each axis."""
+    """The scene folder's scene as the references render it (``reference_scene_and_roulette``)."""
+    return reference_scene_and_roulette(scene_dir, cfg)[0]
+
+
+def reference_scene_and_roulette(scene_dir: Path, cfg: ReferenceConfig) -> tuple[Scene, RouletteDepth, str]:
+    """The scene folder's scene as the references render it, with the roulette depth of ``reference_roulette``
+    (it changes their noise and what a finite render misses, not what they estimate; render/core/DESIGN.md §12),
+    on a film ``cfg.downsample`` times coarser in each axis; and that depth, with its source."""
     scene = Scene.load(Path(scene_dir) / "scene.json")
-    scene = dataclasses.replace(scene, rr_depth=reference_roulette(scene, cfg)[0].rr_depth)
+    roulette, source = reference_roulette(scene, cfg)
+    scene = dataclasses.replace(scene, rr_depth=roulette.rr_depth)
     if cfg.downsample > 1:
         camera, k = scene.camera, cfg.downsample
         if camera.width % k or camera.height % k:
@@ -76,7 +71,7 @@ def reference_scene(scene_dir: Path, cfg: ReferenceConfig) -> Scene:
         scene = dataclasses.replace(
             scene, camera=dataclasses.replace(camera, width=camera.width // k, height=camera.height // k)
         )
-    return scene
+    return scene, roulette, source
 
 
 def run_reference_stage(
@@ -85,10 +80,9 @@ def run_reference_stage(
     """Render ``scene_dir/scene.json`` as ``cfg`` asks and write the reference outputs into ``out_dir``:
     steady.exr/.npy, frames.npy, frames/frame_NNNN.exr, transient_steady.npy and timing.json."""
     scene_dir, out_dir = Path(scene_dir), Path(out_dir)
-    scene = reference_scene(scene_dir, cfg)
+    scene, roulette, source = reference_scene_and_roulette(scene_dir, cfg)
     transient = cfg.transient and scene.film.mode == "transient"
     warnings = check_reference_limits(scene, transient=transient, force=cfg.force)
-    roulette, source = reference_roulette(scene, cfg)
     log.info(
         "reference: roulette from collision %d (%s), expected to leave out %.2g %% of the light (%s)",
         roulette.rr_depth,
@@ -96,9 +90,9 @@ def run_reference_stage(
         100 * roulette.missed,
         roulette.medium or "no medium",
     )
-    dark = dark_reference_warning(roulette, source)
+    dark = dark_reference(roulette)
     if dark:
-        warnings.append(dark)
+        warnings.append(f"the {dark}")
     if cfg.transient and not transient:
         warnings.append("reference.transient is set but scene.film.mode is steady: no transient reference")
     for w in warnings:

@@ -16,7 +16,7 @@ from render.output.agreement import agreement
 from render.output.figures import error_curves
 from render.output.files import RenderOutputs
 from render.output.metrics import RELMSE_EPSILON, box_downsample, downsample_factor, relmse
-from render.scene.roulette import DARK_WARNING_SHARE
+from render.scene.roulette import RouletteDepth, dark_reference
 
 log = logging.getLogger(__name__)
 
@@ -129,16 +129,11 @@ def write_table(rows: list[dict[str, Any]], out_dir: Path, stem: str = "comparis
 
 
 def likely_dark(reference_timing: dict[str, Any]) -> str | None:
-    """What the agreement column adds when the reference's roulette is expected to leave out more than
-    ``DARK_WARNING_SHARE`` of the light (its timing.json's ``roulette``, render/scene/roulette.py)."""
-    roulette = reference_timing.get("roulette") or {}
-    missed = roulette.get("missed", 0.0)
-    if missed <= DARK_WARNING_SHARE:
+    """``dark_reference`` of the depth a reference's timing.json records (``roulette``), or None."""
+    roulette = reference_timing.get("roulette")
+    if not roulette:
         return None
-    return (
-        f"reference likely dark by {missed:.1%} ({roulette.get('medium', '')}; its roulette from collision "
-        f"{roulette.get('rr_depth')}): set reference.rr_depth: auto"
-    )
+    return dark_reference(RouletteDepth(roulette["rr_depth"], roulette["missed"], roulette["medium"]))
 
 
 def compare_renders(ours_dir: Path | None, reference_dir: Path | None, out_dir: Path) -> dict[str, Any]:

@@ -23,11 +23,11 @@ import numpy as np
 import yaml
 
 from pipeline.atomic import write_text_atomic
+from render.output.compare import likely_dark
 from render.output.figures import error_curves, poster_grid
 from render.output.files import RenderOutputs
 from render.output.metrics import relmse
 from render.output.report import html_page, markdown_table_to_html
-from render.scene.roulette import DARK_WARNING_SHARE
 
 log = logging.getLogger(__name__)
 
@@ -145,14 +145,9 @@ def _point_row(
     roulette = timing.get("roulette") or {}
     row["reference_rr_depth"] = roulette.get("rr_depth")
     row["reference_missed_share"] = _number(roulette.get("missed"))
-    if (row["reference_missed_share"] or 0.0) > DARK_WARNING_SHARE:
-        log.warning(
-            "sweep summary: point '%s': its reference is likely %.1f %% dark (roulette from collision %s); "
-            "set reference.rr_depth: auto",
-            name,
-            100 * row["reference_missed_share"],
-            row["reference_rr_depth"],
-        )
+    dark = likely_dark(timing)
+    if dark:
+        log.warning("sweep summary: point '%s': its %s", name, dark)
     if truth is None:
         row.update(_compare_errors(files))
     else:

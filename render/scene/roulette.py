@@ -189,6 +189,17 @@ def auto_rr_depth(
     return RouletteDepth(rr_depth=depth, missed=missed, medium=where)
 
 
+def dark_reference(roulette: RouletteDepth) -> str | None:
+    """The words every stage uses for a reference depth expected to leave out more than
+    ``DARK_WARNING_SHARE`` of some light; None when it does not."""
+    if roulette.missed <= DARK_WARNING_SHARE:
+        return None
+    return (
+        f"reference is likely {100 * roulette.missed:.1f} % dark (roulette from collision {roulette.rr_depth}): it "
+        f"is expected to leave out that share of the light of {roulette.medium}; set reference.rr_depth: auto"
+    )
+
+
 def _round_up(depth: int) -> int:
     """``depth`` rounded up to two significant figures (a depth one can read in a log)."""
     if depth < 100:
