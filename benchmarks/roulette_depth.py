@@ -6,9 +6,10 @@ film is the demo's camera 4x coarser (80 x 60) at 16 spp (``REDUCED``), 16x chea
 Prints, per channel, each depth's mean against the deep one's, the share the model expected it to miss, and
 its time; writes the table to benchmarks/results/.
 
-Each render is a pipeline run (``runs/rr_<snow>_<depth>``), so a second invocation reuses finished stages.
+Each snow and seed is one pipeline run (``runs/rr_<snow>_s<seed>``) whose reference stage is rendered again at
+each depth; its geometry and scene are grown once and reused.
 
-    .venv/bin/python benchmarks/roulette_depth.py [--snow fresh_snow ...]
+    .venv/bin/python benchmarks/roulette_depth.py [--snow fresh_snow ...] [--seeds 1 2]
 """
 
 from __future__ import annotations
@@ -40,11 +41,12 @@ SHORT = {"fresh_snow": "fresh", "penitente_firn": "firn", "fine_0.2mm": "fine"}
 FIXED_DEPTH = 3000
 
 
-def steady_reference(snow: str, depth: int | str) -> tuple[np.ndarray, dict]:
-    """The demo's steady reference for ``snow`` at roulette ``depth``: its per-channel mean and timing.json."""
-    label = "auto" if depth == "auto" else "3000" if depth == FIXED_DEPTH else "deep"
-    name = f"rr_{SHORT[snow]}_{label}"
-    sets = [f"name={name}", "reference.transient=false", f"reference.rr_depth={depth}", *REDUCED, *SNOWS[snow]]
+def steady_reference(snow: str, depth: int | str, seed: int) -> tuple[np.ndarray, dict]:
+    """The demo's steady reference for ``snow`` at roulette ``depth``, field and reference grown and rendered at
+    ``seed``: its per-channel mean and timing.json."""
+    name = f"rr_{SHORT[snow]}_s{seed}"
+    sets = [f"name={name}", f"seed={seed}", "reference.transient=false", f"reference.rr_depth={depth}"]
+    sets += [*REDUCED, *SNOWS[snow]]
     command = [sys.executable, "-m", "pipeline", "run", "configs/demo.yaml", "-q"]
     command += [arg for s in sets for arg in ("--set", s)]
     command += [arg for stage in ("geometry", "scene", "reference") for arg in ("--stage", stage)]
@@ -57,28 +59,29 @@ def steady_reference(snow: str, depth: int | str) -> tuple[np.ndarray, dict]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--snow", nargs="+", choices=list(SNOWS), default=list(SNOWS))
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2], help="seeds of the field and the renders")
     args = parser.parse_args()
     lines = [
-        "| snow | depth | rr_depth | expected missed | mean / deep (R / G / B) | steady reference [s] |",
-        "|---|---|---|---|---|---|",
+        "| snow | seed | depth | rr_depth | expected missed | mean / deep (R / G / B) | steady reference [s] |",
+        "|---|---|---|---|---|---|---|",
     ]
     for snow in args.snow:
-        auto_mean, auto_timing = steady_reference(snow, "auto")
-        deep_depth = 10 * auto_timing["roulette"]["rr_depth"]
-        runs = {
-            "auto": (auto_mean, auto_timing),
-            "10x auto": steady_reference(snow, deep_depth),
-            "fixed": steady_reference(snow, FIXED_DEPTH),
-        }
-        deep_mean = runs["10x auto"][0]
-        for label, (mean, timing) in runs.items():
-            ratio = " / ".join(f"{r:.4f}" for r in mean / deep_mean)
-            roulette = timing["roulette"]
-            lines.append(
-                f"| {snow} | {label} | {roulette['rr_depth']} | {roulette['missed']:.2%} | {ratio} | "
-                f"{timing['steady']['seconds']:.0f} |"
-            )
-            print(lines[-1], flush=True)
+        for seed in args.seeds:
+            auto_mean, auto_timing = steady_reference(snow, "auto", seed)
+            runs = {
+                "auto": (auto_mean, auto_timing),
+                "10x auto": steady_reference(snow, 10 * auto_timing["roulette"]["rr_depth"], seed),
+                "fixed": steady_reference(snow, FIXED_DEPTH, seed),
+            }
+            deep_mean = runs["10x auto"][0]
+            for label, (mean, timing) in runs.items():
+                ratio = " / ".join(f"{r:.4f}" for r in mean / deep_mean)
+                roulette = timing["roulette"]
+                lines.append(
+                    f"| {snow} | {seed} | {label} | {roulette['rr_depth']} | {roulette['missed']:.2%} | {ratio} | "
+                    f"{timing['steady']['seconds']:.0f} |"
+                )
+                print(lines[-1], flush=True)
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "roulette_depth.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     print("\n".join(lines))
