@@ -154,7 +154,8 @@ def draw_shots(
 
     1. signal: Poisson(N̄) photons, N̄ = ``signal_photons_per_shot``; each photon's OPL is a bin drawn with the
        impulse response's weights, uniform within the bin, plus the Gaussian pulse (FWHM ``pulse_fwhm_ns``);
-    2. background: Poisson(R · 2ΔH/c) photons uniform over the telemetry ``window`` (heights, ΔH its span);
+    2. background: Poisson(R · 2ΔH/c) photons uniform over the telemetry ``window`` (heights about the shot's
+       surface offset, as ATLAS's telemetry band follows the surface; ΔH its span);
     3. a channel, uniform over the beam's channels, for every photon;
 
     then photons outside the window are dropped (the telemetry band) and, with ``dead_time``, each channel's
@@ -171,7 +172,7 @@ def draw_shots(
         raise ValueError(f"the telemetry window must be (lowest, highest) height in metres, got {window}")
     background_mean = background_hz * 2.0 * (high - low) / SPEED_OF_LIGHT
     sigma_opl = pulse_sigma_opl(budget.pulse_fwhm_ns)
-    heights, shot_of, channels, is_signal = [], [], [], []
+    heights, shot_of, channels, is_signal, lifted = [], [], [], [], []
     for i, shot in enumerate(shot_index):
         rng = np.random.default_rng([int(seed), int(shot)])
         n_signal = rng.poisson(means[which[i]])
@@ -179,12 +180,13 @@ def draw_shots(
         bins = np.searchsorted(cumulative[which[i]], rng.random(n_signal), side="right")
         opl = (bins + rng.random(n_signal)) * bin_width_opl + sigma_opl * rng.standard_normal(n_signal)
         signal_heights = reference_height - 0.5 * opl + offset[i]
-        background_heights = low + (high - low) * rng.random(n_background)
+        background_heights = low + (high - low) * rng.random(n_background) + offset[i]
         count = n_signal + n_background
         heights.append(np.concatenate((signal_heights, background_heights)))
         channels.append(rng.integers(0, beam.channels, count))
         is_signal.append(np.arange(count) < n_signal)
         shot_of.append(np.full(count, shot, np.int64))
+        lifted.append(np.full(count, offset[i]))
     if not heights:
         empty = np.zeros(0)
         return PhotonEvents(empty.astype(np.int64), empty, empty.astype(np.int16), empty.astype(bool))
@@ -194,7 +196,8 @@ def draw_shots(
         np.concatenate(channels).astype(np.int16),
         np.concatenate(is_signal),
     )
-    events = events.subset((events.height >= low) & (events.height <= high))
+    band = events.height - np.concatenate(lifted)  # heights about each shot's surface offset
+    events = events.subset((band >= low) & (band <= high))
     return apply_dead_time(events, beam.dead_time_opl) if dead_time else events
 
 
