@@ -32,12 +32,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.fft
 
-from geometry import irradiance, sunpath
+from geometry import energy, irradiance, sunpath
 
 log = logging.getLogger(__name__)
 
-LATENT_HEAT_SUBLIMATION = 2.834e6  # L_s [J kg-1]
-LATENT_HEAT_FUSION = 0.334e6  # L_f [J kg-1]
+LATENT_HEAT_SUBLIMATION = energy.LATENT_HEAT_SUBLIMATION  # L_s [J kg-1]
+LATENT_HEAT_FUSION = energy.LATENT_HEAT_FUSION  # L_f [J kg-1]
 
 
 def wavenumbers(n: int, spacing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -443,6 +443,7 @@ class GrowthSettings:
     efolding_depth: float = 0.0  # l [m], 0 = no penetration spreading
     slope_order: int = 2  # 2: second-order (minmod ENO) slopes, 1: first-order upwind (DESIGN.md 6.1)
     melt_gain_threshold: float = 1.0  # melt needs absorbed flux above this x sky_loss x V_sky; 0 = off (3.9)
+    meteorology: energy.Meteorology | None = None  # set: the surface energy balance replaces sky_loss (3.9)
 
 
 @dataclass
@@ -475,6 +476,18 @@ class PeriodLight:
     absorbed: np.ndarray
     seconds: float
     flux_seconds: float
+    moments: list[tuple[float, np.ndarray]] = field(default_factory=list)  # (duration [s], direct + sky [J m-2])
+
+    def absorbed_at_each_sun(self, albedo: float) -> list[tuple[float, np.ndarray]]:
+        """Each sun position's duration [s] and absorbed energy per unit true area [J m-2]. The terrain light
+        a cell gathers comes from the whole field, so each position takes the share of it that its field-mean
+        direct + sky light has of the period's (exact for the period's sum)."""
+        total = float(sum(float(np.mean(incident)) for _, incident in self.moments))
+        parts = []
+        for duration, incident in self.moments:
+            share = float(np.mean(incident)) / total if total > 0 else 0.0
+            parts.append((duration, (1.0 - albedo) * (incident + share * self.terrain)))
+        return parts
 
 
 def _period_light(
@@ -491,6 +504,7 @@ def _period_light(
     sky = np.zeros_like(h)
     flux_seconds = 0.0
     beams = []
+    moments: list[tuple[float, np.ndarray]] = []
     slopes = OneSidedSlopes.of(h, spacing, s.slope_order)  # the geometry is frozen for the period
     for j in chunk:
         vector, duration = sun.vectors[j], float(sun.durations[j])
@@ -500,34 +514,86 @@ def _period_light(
         p, q = sunward_of(slopes, vector, s.max_slope_deg)
         lit = duration * s_b * irradiance.sun_visibility(h, spacing, vector)
         beams.append((lit, p, q, vector))
-        direct += lit * direct_beam_lowering(p, q, vector) / np.sqrt(1.0 + p * p + q * q)
-        sky += duration * s_d * horizons.sky_view
+        direct_now = lit * direct_beam_lowering(p, q, vector) / np.sqrt(1.0 + p * p + q * q)
+        sky_now = duration * s_d * horizons.sky_view
+        moments.append((duration, direct_now + sky_now))
+        direct += direct_now
+        sky += sky_now
     terrain = irradiance.bounce_terrain_light(direct + sky, s.albedo, spacing, horizons, s.bounces)
     absorbed = (1.0 - s.albedo) * (direct + sky + terrain)
-    return PeriodLight(beams, sky, terrain, absorbed, float(sun.durations[chunk].sum()), flux_seconds)
+    return PeriodLight(beams, sky, terrain, absorbed, float(sun.durations[chunk].sum()), flux_seconds, moments)
 
 
 def _period_energy(
-    light: PeriodLight,
-    s: GrowthSettings,
-    sun: sunpath.DailySun,
-    horizons: irradiance.Horizons,
-    inverse_heat: np.ndarray,
-    melt: np.ndarray,
+    light: PeriodLight, s: GrowthSettings, inverse_heat: np.ndarray, kept: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """The period's light split for the recession step: the direct beam per unit horizontal area, already
     weighted by 1/L_eff over the surface it hits (direct_beam_mass) [kg m-2], and the sky + terrain light per
-    unit true area [J m-2], both absorbed and net of the period's share of the loss to the sky."""
+    unit true area [J m-2], both absorbed and scaled by ``kept``, the share of the absorbed energy that ablates."""
     absorptance = 1.0 - s.albedo
     direct_mass = np.zeros_like(light.sky)  # per horizontal area, times 1/L_eff
     for lit, p, q, vector in light.beams:
         direct_mass += lit * direct_beam_mass(p, q, vector, inverse_heat)
-    # The whole day's (24 h) loss to the sky, shared among the day's periods by their daylight.
+    return absorptance * direct_mass * kept, absorptance * (light.sky + light.terrain) * kept
+
+
+def constant_loss_kept(
+    light: PeriodLight, s: GrowthSettings, sun: sunpath.DailySun, horizons: irradiance.Horizons, melt: np.ndarray
+) -> np.ndarray:
+    """Share of the period's absorbed energy above the constant loss to the sky (DESIGN.md 3.8): the whole day's
+    (24 h) sky_loss, shared among the day's periods by their daylight, times V_sky, its turbulent share
+    stopping where the air is still (melt fraction ``melt``)."""
     share = light.seconds / float(sun.durations.sum())
     ventilated = 1.0 - s.turbulent_share * melt
     sink = s.sky_loss * sunpath.SECONDS_PER_DAY * share * horizons.sky_view * ventilated
-    kept = net_energy_fraction(light.absorbed, sink)
-    return absorptance * direct_mass * kept, absorptance * (light.sky + light.terrain) * kept
+    return net_energy_fraction(light.absorbed, sink)
+
+
+def ventilation(horizons: irradiance.Horizons, s: GrowthSettings) -> np.ndarray:
+    """Share of the open field's wind that reaches each cell [-]: 1 - Sx / tan(theta_m), the complement of the
+    shelter switch (DESIGN.md 3.9), so still air is where the switch melts."""
+    return 1.0 - sheltered_melt_fraction(horizons.shelter, s.shelter_full_melt_deg)
+
+
+# Balance solves per period: consecutive sun positions share one, at their mean absorbed flux (DESIGN.md 3.9).
+BALANCE_STEPS_PER_PERIOD = 4
+
+
+def balance_split(
+    light: PeriodLight, s: GrowthSettings, horizons: irradiance.Horizons
+) -> tuple[np.ndarray, np.ndarray]:
+    """The surface energy balance of a daylight period (DESIGN.md 3.9, *Surface energy balance*) as the growth
+    loop's two fields: the share of the absorbed energy that ablates, (melt + sublimation energy) / absorbed, and
+    the melt fraction w of that energy; then k (1/L_eff) Q = melt / L_f + sublimation / L_s. The balance is solved
+    BALANCE_STEPS_PER_PERIOD times through the period's sun positions, each at their mean absorbed flux, with the
+    cell's sky view and ventilation: melt is a threshold, and the midday flux crosses it where the day's mean
+    would not."""
+    assert s.meteorology is not None
+    draft = ventilation(horizons, s)
+    melt_energy, sublimation_energy = np.zeros_like(light.absorbed), np.zeros_like(light.absorbed)
+    moments = light.absorbed_at_each_sun(s.albedo)
+    for group in np.array_split(np.arange(len(moments)), min(BALANCE_STEPS_PER_PERIOD, len(moments))):
+        duration = sum(moments[j][0] for j in group)
+        absorbed = sum(moments[j][1] for j in group)
+        state = energy.surface_state(absorbed / duration, horizons.sky_view, draft, s.meteorology)
+        melt_energy += state.melt_flux * duration
+        sublimation_energy += state.sublimation_flux * duration
+    total = melt_energy + sublimation_energy
+    kept = np.divide(total, light.absorbed, out=np.zeros_like(total), where=light.absorbed > 0)
+    if not s.melt_enabled:
+        return kept, np.zeros_like(total)
+    return kept, np.divide(melt_energy, total, out=np.zeros_like(total), where=total > 0)
+
+
+def night_lowering(
+    h: np.ndarray, spacing: float, s: GrowthSettings, horizons: irradiance.Horizons, seconds: float
+) -> np.ndarray:
+    """Lowering [m] by the night's sublimation (DESIGN.md 3.9, *Night*): no shortwave, each cell's balance at
+    its sky view and ventilation for ``seconds``, per unit true area and so times the Godunov area factor."""
+    assert s.meteorology is not None
+    state = energy.surface_state(0.0, horizons.sky_view, ventilation(horizons, s), s.meteorology)
+    area, _ = surface_inverse_latent_heat(h, spacing, np.ones_like(h), s.max_slope_deg, s.slope_order)
+    return s.ablation_efficiency / s.density * state.mass_rate() * seconds * area
 
 
 def grow_field(
@@ -561,14 +627,19 @@ def grow_field(
             t1 = time.perf_counter()
             light = _period_light(h, spacing, s, sun, chunk, horizons)
             absorbed, flux_seconds = light.absorbed, light.flux_seconds
-            melt = switch_melt_fraction(horizons, s) if s.melt_enabled else np.zeros_like(h)
-            if s.melt_gain_threshold > 0:
-                gate = net_gain_gate(absorbed, light.seconds, horizons.sky_view, s.sky_loss, s.melt_gain_threshold)
-                melt = melt * gate
+            if s.meteorology is not None:
+                kept, melt = balance_split(light, s, horizons)
+            else:
+                melt = switch_melt_fraction(horizons, s) if s.melt_enabled else np.zeros_like(h)
+                if s.melt_gain_threshold > 0:
+                    gate = net_gain_gate(absorbed, light.seconds, horizons.sky_view, s.sky_loss, s.melt_gain_threshold)
+                    melt = melt * gate
             # Absorbed light warms the ice over the e-folding depth: the melting state varies over l, not per cell.
             melt = np.clip(spread_by_penetration(melt, transfer), 0.0, 1.0)
+            if s.meteorology is None:
+                kept = constant_loss_kept(light, s, sun, horizons, melt)
             inverse_heat = inverse_latent_heat(melt)
-            direct_mass, diffuse = _period_energy(light, s, sun, horizons, inverse_heat, melt)
+            direct_mass, diffuse = _period_energy(light, s, inverse_heat, kept)
             # All light is absorbed over l below the surface and spreads as far sideways, so no feature
             # narrower than l ablates apart from its surroundings (DESIGN.md 3.10, 7 Grid convergence).
             direct_mass = np.maximum(spread_by_penetration(direct_mass, transfer), 0.0)
@@ -599,6 +670,10 @@ def grow_field(
             t3 = time.perf_counter()
             for key, dt in zip(timings, (t1 - t0, t2 - t1, t3 - t2)):
                 timings[key] += dt
+        if s.meteorology is not None and horizons is not None:
+            night = sunpath.SECONDS_PER_DAY - float(sun.durations.sum())
+            if night > 0:
+                h = h - spread_by_penetration(night_lowering(h, spacing, s, horizons, night), transfer)
         relief.append(float(h.std()))
         if (day + 1) % snapshot_every == 0 or day + 1 == s.days:
             snapshots.append(h.copy())
@@ -638,12 +713,22 @@ def energy_warnings(cfg) -> list[str]:
     lowering = flat_season_lowering(settings_from_config(cfg), cfg.spacing)
     if lowering >= FLAT_LOWERING_FLOOR:
         return []
+    if cfg.meteorology is not None:
+        met = cfg.meteorology
+        return [
+            f"flat ground loses {1000 * max(0.0, lowering):.2g} mm over the {cfg.days}-day season: under "
+            f"geometry.meteorology (air {met.air_temperature:g} C, vapour {met.vapour_pressure:g} hPa, wind "
+            f"{met.wind_speed:g} m/s) the longwave and turbulent losses take nearly all that a surface of "
+            f"geometry.albedo = {cfg.albedo:g} absorbs at geometry.latitude = {cfg.latitude:g} from day "
+            f"{cfg.start_day_of_year}, so the field will barely grow. Check the site's forcing, the albedo and the "
+            "season (geometry/DESIGN.md 7, Limits)"
+        ]
     return [
         f"flat ground loses {1000 * max(0.0, lowering):.2g} mm over the {cfg.days}-day season: geometry.sky_loss = "
         f"{cfg.sky_loss:g} W m-2 takes nearly all that a surface of geometry.albedo = {cfg.albedo:g} absorbs at "
         f"geometry.latitude = {cfg.latitude:g} from day {cfg.start_day_of_year}, so the field will barely grow. "
-        "Set a geometry.sky_loss measured for the site's air, or check the albedo and the season "
-        "(geometry/DESIGN.md 7, Limits)"
+        "Set geometry.meteorology for the site's air (the surface energy balance), or check the albedo and the "
+        "season (geometry/DESIGN.md 7, Limits)"
     ]
 
 
@@ -682,7 +767,25 @@ def settings_from_config(cfg) -> GrowthSettings:
         bounces=cfg.bounces,
         max_slope_deg=cfg.max_slope_deg,
         sky_loss=cfg.sky_loss,
+        meteorology=meteorology_from_config(cfg.meteorology),
         cfl=cfg.cfl,
         snapshots=cfg.snapshots,
         slope_order=cfg.slope_order,
+    )
+
+
+def meteorology_from_config(met) -> energy.Meteorology | None:
+    """energy.Meteorology in SI units from a MeteorologyConfig (degC, hPa), or None."""
+    if met is None:
+        return None
+    return energy.Meteorology(
+        air_temperature=met.air_temperature + energy.MELTING_POINT,
+        vapour_pressure=met.vapour_pressure * 100.0,
+        wind_speed=met.wind_speed,
+        cloud_fraction=met.cloud_fraction,
+        air_pressure=met.air_pressure * 100.0,
+        measurement_height=met.measurement_height,
+        roughness_length=met.roughness_length,
+        scalar_roughness_length=met.scalar_roughness_length,
+        surface_emissivity=met.surface_emissivity,
     )

@@ -17,6 +17,57 @@ from pipeline.schema.base import StrictModel
 CELLS_PER_CORRELATION_LENGTH = 4.0
 CELLS_PER_EFOLDING_DEPTH = 1.5
 
+# Keys of the constant-loss mode that geometry.meteorology replaces (geometry/DESIGN.md 3.9).
+CONSTANT_LOSS_KEYS = ("sky_loss", "turbulent_loss_share", "melt_gain_threshold")
+
+
+class MeteorologyConfig(StrictModel):
+    """The site's air during the season, the forcing of the surface energy balance (key path
+    geometry.meteorology.<field>; geometry/DESIGN.md 3.9, *Surface energy balance*). Season means, day and night."""
+
+    air_temperature: float = Field(
+        ..., ge=-60, le=30, description="Air temperature T_a at measurement_height, season mean [degC]."
+    )
+    vapour_pressure: float = Field(
+        ..., gt=0, le=50, description="Water-vapour pressure e_a of the air, season mean (Guanaco 1.1) [hPa]."
+    )
+    wind_speed: float = Field(
+        ..., ge=0, le=40, description="Wind speed u at measurement_height over the open field, season mean [m s-1]."
+    )
+    cloud_fraction: float = Field(
+        0.0, ge=0, le=1, description="Cloud cover n; it raises the sky's emissivity as n^2 (Konzelmann 1994) [-]."
+    )
+    air_pressure: float = Field(
+        ..., ge=300, le=1100, description="Air pressure p at the site, for the air density and the humidity [hPa]."
+    )
+    measurement_height: float = Field(
+        2.0, gt=0, le=50, description="Height z of the temperature, humidity and wind measurements [m]."
+    )
+    roughness_length: float = Field(
+        0.002,
+        gt=0,
+        le=0.5,
+        description="Momentum roughness length z0 of the surface between the forms; the bulk transfer coefficient "
+        "is C = kappa^2 / (ln(z/z0) ln(z/z0s)) (Winkler et al. 2009: 2 mm on smooth ice) [m].",
+    )
+    scalar_roughness_length: float = Field(
+        0.001,
+        gt=0,
+        le=0.5,
+        description="Roughness length z0s for heat and vapour (Winkler et al. 2009: 1 mm on smooth ice) [m].",
+    )
+    surface_emissivity: float = Field(0.99, ge=0.9, le=1, description="Longwave emissivity eps_s of snow and ice [-].")
+
+    @model_validator(mode="after")
+    def _check_air(self) -> MeteorologyConfig:
+        if self.measurement_height <= max(self.roughness_length, self.scalar_roughness_length):
+            raise ValueError(
+                "geometry.meteorology.measurement_height must lie above the roughness lengths "
+                f"(z = {self.measurement_height} m, z0 = {self.roughness_length} m, "
+                f"z0s = {self.scalar_roughness_length} m)"
+            )
+        return self
+
 
 class GeometryConfig(StrictModel):
     """How a penitente field is grown, meshed and pictured (key path geometry.<field>)."""
@@ -74,6 +125,13 @@ class GeometryConfig(StrictModel):
         "times its sky view factor and each day only the absorbed shortwave above that ablates (on flat "
         "Tapado ice this leaves ~46 % of the absorbed shortwave); 0 folds the loss into "
         "ablation_efficiency [W m-2].",
+    )
+    meteorology: MeteorologyConfig | None = Field(
+        None,
+        description="The site's air; when set, a surface energy balance per cell (longwave, sensible and latent heat "
+        "in the wind each cell sees) decides how much of the absorbed light ablates and whether it melts or "
+        "sublimates, replacing sky_loss, turbulent_loss_share and melt_gain_threshold (geometry/DESIGN.md 3.9); "
+        "null: the constant loss to the sky [-].",
     )
     melt_enabled: bool = Field(
         True, description="Lliboutry switch on; false = sublimation only (cold lab, planets) [-]."
@@ -257,4 +315,12 @@ class GeometryConfig(StrictModel):
             )
         if self.switch_width > self.switch_centre:
             raise ValueError("geometry.switch_width must not exceed geometry.switch_centre")
+        if self.meteorology is not None:
+            both = [f"geometry.{key}" for key in CONSTANT_LOSS_KEYS if key in self.model_fields_set]
+            if both:
+                raise ValueError(
+                    f"{', '.join(both)} and geometry.meteorology are both set: the surface energy balance of "
+                    "geometry.meteorology replaces the constant loss to the sky. Remove "
+                    f"{', '.join(both)}, or set geometry.meteorology: null to keep the constant loss"
+                )
         return self
