@@ -1,20 +1,22 @@
 """An ATL06-like land-ice surface finder for photon events, and a track simulator (LIDAR.md §9.3).
 
-Follows the ATL06 ATBD (Smith et al., land ice along-track height; the procedure numbers are those of its
-§5.5, §5.7 and §5.9 as SlideRule's implementation cites them) and Smith et al. 2019 (RSE 233, 111352) for the
-first-photon-bias correction. Per 40 m segment (two 20 m halves, one every 20 m):
+Follows the ATL06 ATBD (Smith et al., land ice along-track height) as its author's reference code implements it
+(SmithB/IS2_land_ice_ATBD: ATLAS_L3a_proc_ATBD.m, fpb_corr.m), with the procedure numbers of its §5.5, §5.7 and
+§5.9 as SlideRule's implementation cites them, and Smith et al. 2019 (RSE 233, 111352) for the first-photon-bias
+correction (LIDAR.md §9.3). Per 40 m segment (two 20 m halves, one every 20 m):
 
 1. initial selection: the photons within ``initial_window``/2 of the densest 1 m of height (stands in for
    ATL03's signal classification, which this model does not have);
 2. iterate: fit h = h_mean + slope·(x − x_c) to the selected photons by least squares; take the residuals of
    all the segment's photons; the robust spread σ_r of the selected ones with the background removed (§5.9);
    the window H = max(H_min, 6σ_expected, 6σ_r), at least 0.75 of the previous one (§5.5 p4e, §5.7 p2e);
-   select |r| < H/2; stop when the selection does not change, fewer than ``min_photons`` or less than
-   ``min_spread`` along track remain, or after ``max_iterations``;
+   select |r| < H/2; stop when the selection does not change or after ``max_iterations``; a selection of fewer
+   than ``min_photons`` or spanning less than ``min_spread`` is not taken (the last usable one stays);
 3. the background-corrected median of the residuals (med_r_fit) and the first-photon-bias corrections from the
    dead time and the received photon rate (``first_photon_bias``);
-4. h_li = h_mean + med_r_fit + fpb_med_corr: ATL06's median-based height. The transmit-pulse-shape correction is
-   zero here because the model's pulse is a symmetric Gaussian.
+4. h_li = h_mean + med_r_fit + fpb_med_corr, the reference code's h_mean + (its) fpb_med_corr: the median of the
+   gain-corrected residuals. The transmit-pulse-shape correction is zero here because the model's pulse is a
+   symmetric Gaussian.
 
 Pure numpy, no I/O.
 """
@@ -177,13 +179,17 @@ def fit_segment(
     density, edges = np.histogram(h, bins=max(1, math.ceil(np.ptp(h) / 1.0)))
     mode = 0.5 * (edges[np.argmax(density)] + edges[np.argmax(density) + 1])
     selected = np.abs(h - mode) <= 0.5 * settings.initial_window
-    window, iterations = math.nan, 0
-    lower = upper = 0.0
-    h_mean = slope = scale = 0.0
+
+    def usable(chosen: np.ndarray) -> bool:
+        return bool(chosen.sum() >= settings.min_photons and np.ptp(x[chosen]) >= settings.min_spread)
+
+    if not usable(selected):
+        return failed
+    window = math.nan  # the last window computed
+    chosen_by = settings.initial_window  # the window that made the current selection
+    iterations = 0
     while iterations < settings.max_iterations:
         iterations += 1
-        if selected.sum() < settings.min_photons or np.ptp(x[selected]) < settings.min_spread:
-            return failed
         h_mean, slope, scale = _line_fit(dx[selected], h[selected])
         residuals = h - h_mean - slope * dx
         chosen = np.sort(residuals[selected])
@@ -196,11 +202,15 @@ def fit_segment(
         expected = math.hypot(sigma_pulse, sigma_beam * slope)
         window = max(settings.window_min, 6.0 * expected, 6.0 * spread, 0.75 * window)
         now = np.abs(residuals) < 0.5 * window
+        if not usable(now):
+            break  # keep the last usable selection and its window, as the ATBD's reference code does
+        chosen_by = window
         if np.array_equal(now, selected):
             break
         selected = now
-    if selected.sum() < settings.min_photons or np.ptp(x[selected]) < settings.min_spread:
-        return failed
+    window = chosen_by
+    h_mean, slope, scale = _line_fit(dx[selected], h[selected])
+    residuals = h - h_mean - slope * dx
     inside = np.sort(residuals[selected])
     n_signal = inside.size - background_per_m * window
     median = _signal_quantiles(inside, -0.5 * window, background_per_m, n_signal, (0.5,))[0] if n_signal > 1 else 0.0
