@@ -10,7 +10,7 @@ impulse response (Warren & Brandt 2008 ice) the tracks draw their photons from. 
 for 20 s (the snow is the same under every pixel); the penitentes 48 x 48 pixels for 60 s over the tiled field,
 which the geometry stage grows first (about 3 min). Each track is `--length` metres of shots; the bias is the
 mean over segments of h_li minus the true surface (the flat-equivalent height), its spread the standard deviation
-over segments. Writes atl06.md and atl06.csv to --out and prints the acceptance checks and the time of 1 km.
+over segments. A third beam, "strong x4", is the strong beam at the ATBD test data's white-surface rate. Writes atl06.md and atl06.csv to --out and prints the acceptance checks and the time of 1 km.
 --reuse takes the shots a past run copied under --out/atl06; --penitentes-lidar takes the penitentes' shot from
 another lidar run (a field grown by another version of the demo).
 """
@@ -38,6 +38,9 @@ CONFIG = Path("configs/lidar/icesat2.yaml")
 GRAINS = {"0.1": 0.0001, "0.5": 0.0005, "1": 0.001}  # optical diameter [mm] -> [m]
 DENSITIES = (300, 550)
 SUN_ELEVATION_DEG = 30.0  # "day": the sun 30 degrees up; "night": no background
+# A strong beam 4x brighter: the rate the ATBD's reference test data give a white surface (12 photons a shot over 16
+# channels, SmithB/IS2_land_ice_ATBD make_fpb_test_data.m), the sensitivity to the link budget's assumed efficiencies.
+STRONG_X4 = Beam("strong x4", 4 * STRONG.energy_share, STRONG.channels, STRONG.dead_time_ns)
 FLAT = ["lidar.target=flat_snow", "lidar.pixels=16", "lidar.time_budget_s=20", "name=atl06_flat"]
 PENITENTES = ["lidar.pixels=48", "lidar.time_budget_s=60", "name=atl06_penitentes"]
 COLUMNS = (
@@ -148,7 +151,7 @@ def acceptance() -> list[str]:
     ideal = track(impulse, bin_width, z_ref, 2000.0, STRONG, seed=21, dead_time=False, slope=0.01)
     bias, error = mean_and_error(ideal.segments["h_li"] - plane - ideal.surface_offset)
     lines.append(f"no dead time, no background, 1 % slope: bias {bias:+.3f} cm, standard error {error:.3f} cm")
-    bright = Beam("bright", 4 * STRONG.energy_share, 16, 3.0)
+    bright = Beam("bright", 4 * STRONG.energy_share, 16, STRONG.dead_time_ns)
     dead = track(impulse, bin_width, z_ref, 2000.0, bright, seed=22, dead_time=True).segments
     bias, error = mean_and_error(dead["h_li"] - plane)
     raw = 100 * np.mean(dead["h_li"] - dead["fpb_med_corr"] - plane)
@@ -216,7 +219,7 @@ def main() -> None:
     print(timing, flush=True)
     rows = []
     for seed, (label, shot) in enumerate(shots.items()):
-        for beam in (STRONG, WEAK):
+        for beam in (STRONG, WEAK, STRONG_X4):
             for light in ("day", "night"):
                 rows.append(row_of(label, shot, beam, light, args.length, seed=seed))
                 r = rows[-1]

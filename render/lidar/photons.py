@@ -73,9 +73,10 @@ class Beam:
         return SPEED_OF_LIGHT * self.dead_time_ns * 1e-9
 
 
-# Three strong and three weak beams, strong ≈ 4 × weak in energy: 4/15 and 1/15 of the pulse each.
-STRONG = Beam("strong", 4.0 / 15.0, 16, 3.0)
-WEAK = Beam("weak", 1.0 / 15.0, 4, 3.0)
+# Three strong and three weak beams, strong ≈ 4 × weak in energy: 4/15 and 1/15 of the pulse each. The dead time
+# is the ATBD reference code's detector model (t_dead = 3.2 ns; LIDAR.md §9.1).
+STRONG = Beam("strong", 4.0 / 15.0, 16, 3.2)
+WEAK = Beam("weak", 1.0 / 15.0, 4, 3.2)
 
 
 def signal_photons_per_shot(impulse, beam: Beam, budget: LinkBudget = LinkBudget()) -> float:

@@ -84,10 +84,10 @@ def test_signal_heights_spread_as_the_pulse():
 
 
 def test_dead_time_keeps_one_photon_per_channel_for_a_pulse_shorter_than_it():
-    """A 1.5 ns pulse is shorter than the 3 ns dead time, so a channel records the first of its photons and no
+    """A 1.5 ns pulse is shorter than the 3.2 ns dead time, so a channel records the first of its photons and no
     other within the pulse: the recorded count per shot is n(1 − e^(−m/n)) with m photons over n channels (4 SE),
-    and no channel records two photons within the dead time (cτ/2 = 45 cm of height apart at least)."""
-    bright = Beam("bright", STRONG.energy_share * 4, 16, 3.0)
+    and no channel records two photons within the dead time (cτ/2 = 48 cm of height apart at least)."""
+    bright = Beam("bright", STRONG.energy_share * 4, 16, 3.2)
     shots = 3000
     events = draw_shots(np.arange(shots), plane(), BIN, Z_REF, bright, seed=9, dead_time=True)
     m = signal_photons_per_shot(plane(), bright)
@@ -99,7 +99,7 @@ def test_dead_time_keeps_one_photon_per_channel_for_a_pulse_shorter_than_it():
     key, height = (events.shot * 16 + events.channel)[order], events.height[order]
     same = key[1:] == key[:-1]
     assert np.all(height[:-1][same] - height[1:][same] >= 0.5 * bright.dead_time_opl)
-    assert same.sum() < 0.01 * key.size  # two photons 45 cm apart in one shot: the pulse's far tails only
+    assert same.sum() < 0.01 * key.size  # two photons 48 cm apart in one shot: the pulse's far tails only
 
 
 def test_a_shot_draws_the_same_photons_in_any_chunk():
@@ -116,11 +116,11 @@ def test_a_shot_draws_the_same_photons_in_any_chunk():
 
 
 def test_the_preset_says_where_its_numbers_come_from():
-    """The strong and weak beams: 16 and 4 channels, 3 ns dead time, 4:1 in energy; the pulse leaves 300 trillion
+    """The strong and weak beams: 16 and 4 channels, 3.2 ns dead time, 4:1 in energy; the pulse leaves 300 trillion
     photons; the telescope is 0.8 m at 500 km (LIDAR.md §9.1 cites each)."""
     budget = LinkBudget()
     assert (STRONG.channels, WEAK.channels) == (16, 4)
     assert STRONG.energy_share / WEAK.energy_share == 4
     assert 3 * (STRONG.energy_share + WEAK.energy_share) == 1
     assert (budget.photons_per_pulse, budget.telescope_diameter, budget.altitude) == (300e12, 0.8, 500e3)
-    assert math.isclose(STRONG.dead_time_opl, 0.8994, rel_tol=1e-3)
+    assert math.isclose(STRONG.dead_time_opl, 0.9593, rel_tol=1e-3)
