@@ -97,7 +97,7 @@ def first_photon_bias(
     bin_height: float = 0.0025,
 ) -> tuple[float, float]:
     """(median, mean) first-photon-bias corrections [m] of residual heights inside |r| < window/2 (Smith et al.
-    2019 §3.3; read-ICESat-2's ``calc_first_photon_bias``).
+    2019; the ATBD reference code's ``fpb_corr.m``, read-ICESat-2's ``calc_first_photon_bias``).
 
     The detected histogram per pulse and channel, N₀(r), gives the probability that a channel is dead at r: it
     recorded a photon less than a dead time earlier, i.e. higher by less than ``dead_time_height`` = cτ/2,
