@@ -55,10 +55,15 @@ lint: setup ## Lint and format checks (ruff, clang-format) and type checks (mypy
 	clang-format --dry-run --Werror $(CORE_FORMATTED)
 	$(VENV)/bin/mypy
 
+# pytest runs in TEST_JOBS processes (pytest-xdist), one test file per process at a time, so a file's
+# module fixtures are built once; tests render a fixed number of iterations, never against the clock, so a
+# busy core changes how long they take and not what they measure. TEST_JOBS=0 runs them in this process.
+TEST_JOBS ?= 2
+
 test: setup ## Lint, then the C++ tests (ctest) and the Python tests (pytest), except those marked slow
 	$(MAKE) lint
 	$(MAKE) test-cpp
-	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+	$(PY) -m pytest -m "not slow" -n $(TEST_JOBS) --dist loadfile $(PYTEST_ARGS)
 
 test-all: setup ## Run every test, the slow ones included
 	$(MAKE) test-cpp

@@ -37,7 +37,7 @@ def test_orthographic_receiver_sees_the_exact_half_space():
     albedo = 0.9995
     receiver = Receiver((0.0, 0.0), 0.2, 8, 0.05, 0.004, 400)
     scene = shot_scene("flat_snow", receiver, snow=grey(2000 * albedo, 2000 * (1 - albedo)), depth=1.0)
-    r = render(scene, settings(iterations=1, time_budget_s=4))
+    r = render(scene, settings(iterations=3_000))
     expected = float(reflected_radiance(albedo, np.array([1.0]), 1.0)[0])
     ratio = r.steady.mean() / expected
     parts = (r.frames.sum(axis=0) + r.early + r.late).mean() / r.steady.mean()
@@ -104,19 +104,19 @@ SIGMA_A = 0.5
 SURFACE_OPL = 0.01
 
 
-def diffusion_shot(seconds: float, seed: int = 1):
+def diffusion_shot(iterations: int, seed: int = 1):
     """Flat isotropic snow, sigma_s' = 1/l*, under the orthographic receiver: every pixel is the area integral
     of a pencil beam's nadir radiance (reciprocity), bins of 5 mm OPL over 10 m of path; the pixels are
     samples. The reference plane stands 5 mm above the snow (a ray cannot start on the face it would cross),
     so the light that turns back at once arrives at OPL 1 cm (``SURFACE_OPL``)."""
     receiver = Receiver((0.0, 0.0), 0.3, 8, SURFACE_OPL / 2, 0.005, 2002)
     scene = shot_scene("flat_snow", receiver, snow=grey(1 / ELL, SIGMA_A), depth=1.0)
-    return render(scene, settings(iterations=1, time_budget_s=seconds, seed=seed)), receiver
+    return render(scene, settings(iterations=iterations, seed=seed)), receiver
 
 
 @pytest.fixture(scope="module")
 def diffusion_render():
-    return diffusion_shot(30.0)
+    return diffusion_shot(25_000)
 
 
 def mean_path_of(returned, sigma_a: float) -> float:
@@ -155,7 +155,7 @@ def test_area_integrated_return_has_the_diffusion_tail():
     -1.48 and 0.513. 120 s: -1.477 and 0.504. The nadir radiance under the zenith sun shares the asymptote but
     reaches the tail only through next-event estimation, and its fitted sigma_a scattered over 0.511-0.526 in
     two 120 s runs (0.48-0.61 at 30 s), so the flux carries the check."""
-    r, receiver = area_flux_shot(120.0)
+    r, receiver = area_flux_shot(120_000)
     path = flux_path(receiver)
     energy = r.frames.mean(axis=(1, 2, 3)).astype(np.float64)
     fit = (path > 0.3) & (path < 2.0)
@@ -218,12 +218,12 @@ def coarse(values: np.ndarray, group: int) -> np.ndarray:
     return values[: n * group].reshape(n, group).sum(axis=1)
 
 
-def area_flux_shot(seconds: float):
+def area_flux_shot(iterations: int):
     """The area-integrated flux: flat snow under one emitter as wide as the snow, an 8 x 8 film of 10 cm,
     5 mm bins over 10 m of path."""
     receiver = Receiver((0.0, 0.0), 0.1, 8, SURFACE_OPL / 2, 0.005, 2002)
     scene = flux_scene(receiver, grey(1 / ELL, SIGMA_A), depth=1.0, half_width=0.5, gap=FLUX_GAP)
-    return render(scene, settings(iterations=1_000_000, time_budget_s=seconds)), receiver
+    return render(scene, settings(iterations=iterations)), receiver
 
 
 def exact_flux_albedo(sigma_s: float, sigma_a: float) -> float:
@@ -240,7 +240,7 @@ def test_flux_receiver_returns_the_exact_albedo_and_the_diffusion_mean_path():
     every direction, per metre of path (by reciprocity, the nadir radiance under a downward Lambertian emitter as
     wide as the snow). Its time integral is Chandrasekhar's flux albedo within 2 %, and its mean in-snow path is
     diffusion's closed form (LIDAR.md §3.6) within 5 % and exact transport's -d ln A / d sigma_a within 1.5 %."""
-    r, receiver = area_flux_shot(15.0)
+    r, receiver = area_flux_shot(15_000)
     energy = r.frames.mean(axis=(1, 2, 3)).astype(np.float64)
     path = flux_path(receiver)
     total = float((r.frames.sum(axis=0) + r.early + r.late).mean())
@@ -312,20 +312,20 @@ def test_flux_scene_emitters_face_the_snow_and_refuse_bad_rings():
 RING_ELL = (5, 10, 20)  # ring radii in l*, channels 0-2
 
 
-def spatial_flux(seconds: float, seed: int):
+def spatial_flux(iterations: int, seed: int):
     """Rings at 5, 10 and 20 l*, 3 mm wide, in channels 0-2, over a 4 mm film of 32 x 32 pixels at the centre
     (four tiles: both cores work); 2 mm bins over 1.2 m of path; sigma_a = 0.5 per m (sigma_a / sigma_s' =
     1.5e-3; 0.02 per m gives the same ratios, LIDAR.md §7.6)."""
     receiver = Receiver((0.0, 0.0), 0.004, 32, SURFACE_OPL / 2, 0.002, 600)
     rings = [(k * ELL - 0.0015, k * ELL + 0.0015) for k in RING_ELL]
     scene = flux_scene(receiver, grey(1 / ELL, SIGMA_A), depth=1.0, half_width=0.5, rings=rings, gap=FLUX_GAP)
-    r = render(scene, settings(iterations=1_000_000, time_budget_s=seconds, seed=seed))
+    r = render(scene, settings(iterations=iterations, seed=seed))
     return r, receiver, rings, diffusion.DiffusionMedium(1 / ELL, SIGMA_A)
 
 
 @pytest.fixture(scope="module")
 def spatial_flux_render():
-    return spatial_flux(25.0, seed=2)
+    return spatial_flux(2_500, seed=2)
 
 
 def check_ring(shot, ell_ratio: int, bin_opl: float) -> None:
@@ -364,8 +364,8 @@ def test_spatially_resolved_flux_against_diffusion(spatial_flux_render, ell_rati
 
 @pytest.mark.slow
 def test_spatially_resolved_flux_far_out():
-    """The same at rho = 20 l*, where a ring holds 1e-3 of the paths: 150 s, bins of 4 cm."""
-    check_ring(spatial_flux(150.0, seed=3), 20, 0.04)
+    """The same at rho = 20 l*, where a ring holds 1e-3 of the paths: 15 000 iterations, bins of 4 cm."""
+    check_ring(spatial_flux(15_000, seed=3), 20, 0.04)
 
 
 def mitransient_ring(receiver: Receiver, ring: tuple[float, float], spp: int, seed: int, folder) -> np.ndarray:
@@ -400,7 +400,7 @@ def test_the_early_edge_below_diffusion_is_transport_not_our_renderer(tmp_path):
     (4 x 16384 spp, some 4 min) against 60 s of ours, per bin of 2 cm from 5 to 40 l* past the first arrival:
     within 12 % each (mitransient's noise; measured 0.92-1.06), the ring's total within 3 % (0.994), and both
     below 0.9 of the dipole in the first of those bins (0.79 and 0.84)."""
-    shot = spatial_flux(60.0, seed=7)
+    shot = spatial_flux(6_000, seed=7)
     r, _, rings, medium = shot
     ring = rings[RING_ELL.index(10)]
     receiver = Receiver((0.0, 0.0), 0.004, 4, SURFACE_OPL / 2, 0.002, 600)

@@ -203,7 +203,7 @@ def test_h_function_satisfies_its_exact_identities(albedo):
 def test_paths_match_the_exact_half_space_at_snow_density(sigma_t, mu0):
     """Snow's density and albedo (mean free path 0.5-2.5 mm, 2000 collisions a path) against the closed
     form: within 1.5 %. One run's scatter is about 0.3 % (six seeds at sigma_t = 2000: 0.998 +- 0.0013)."""
-    r = render(half_space(sigma_t, 0.9995, mu0), settings(iterations=1, time_budget_s=4))
+    r = render(half_space(sigma_t, 0.9995, mu0), settings(iterations=1_500))
     assert r.stats["path_media"] == 1
     ratio = r.steady.mean() / half_space_expected(0.9995, mu0)
     print(f"sigma_t {sigma_t}, mu0 {mu0}: ours / Chandrasekhar {ratio:.4f} ({r.stats['iterations']} iterations)")
@@ -222,7 +222,7 @@ def test_sky_on_the_exact_half_space_whatever_hemisphere_is_sampled(up):
     scene["environment_radiance"] = (1.0, 1.0, 1.0)
     if up is not None:
         scene["environment_up"] = up
-    r = render(scene, settings(iterations=1, time_budget_s=3))
+    r = render(scene, settings(iterations=1_100))
     ratio = r.steady.mean() / float(sky_reflected_radiance(0.9995, 1.0))
     print(f"sky, environment_up {up}: ours / Chandrasekhar {ratio:.4f} ({r.stats['iterations']} iterations)")
     assert abs(ratio - 1) < 0.015
@@ -238,7 +238,7 @@ def test_chromatic_medium_is_its_three_grey_media():
     chromatic = dense_cube(1.0, albedo, g)
     chromatic["media"][0]["sigma_s"] = tuple(s * albedo for s in sigma_t)
     chromatic["media"][0]["sigma_a"] = tuple(s * (1 - albedo) for s in sigma_t)
-    common = settings(iterations=1, time_budget_s=3, medium_estimator="paths")
+    common = settings(iterations=1_000, medium_estimator="paths")
     mixed = render(chromatic, common)
     grey = [render(dense_cube(s, albedo, g), common).steady.mean(axis=(0, 1))[c] for c, s in enumerate(sigma_t)]
     ratio = mixed.steady.mean(axis=(0, 1)) / np.array(grey)
