@@ -28,7 +28,7 @@ PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find pipeline geometry
 
 CORE_FORMATTED := $(shell find render/core -name '*.cpp' -o -name '*.hpp')
 
-.PHONY: help setup demo poster video lint test test-all test-cpp test-py cluster-test bench convergence sweep sanitize clean distclean
+.PHONY: help setup demo poster video lint docs test test-all test-cpp test-py cluster-test bench convergence sweep sanitize clean distclean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  make %-10s %s\n", $$1, $$2}'
@@ -55,13 +55,18 @@ lint: setup ## Lint and format checks (ruff, clang-format) and type checks (mypy
 	clang-format --dry-run --Werror $(CORE_FORMATTED)
 	$(VENV)/bin/mypy
 
+# The documentation site (mkdocs.yml) in build/site; --strict fails on a broken link, anchor or include.
+docs: setup ## Build the documentation site into build/site (open build/site/index.html); make test runs it
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet --site-dir build/site
+
 # pytest runs in TEST_JOBS processes (pytest-xdist), one test file per process at a time, so a file's
 # module fixtures are built once; tests render a fixed number of iterations, never against the clock, so a
 # busy core changes how long they take and not what they measure. TEST_JOBS=0 runs them in this process.
 TEST_JOBS ?= 2
 
-test: setup ## Lint, then the C++ tests (ctest) and the Python tests (pytest), except those marked slow
+test: setup ## Lint, the docs site (strict), then the C++ tests (ctest) and the Python tests (pytest), except those marked slow
 	$(MAKE) lint
+	$(MAKE) docs
 	$(MAKE) test-cpp
 	$(PY) -m pytest -m "not slow" -n $(TEST_JOBS) --dist loadfile $(PYTEST_ARGS)
 
