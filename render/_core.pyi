@@ -96,3 +96,7 @@ def ptpb_memory_bytes(scene: Mapping[str, Any], settings: Mapping[str, Any], sta
 
 def ptpb_schedule_gamma(iteration: int, alpha: float) -> float:
     """Kernel-volume factor gamma_i = prod_{k=1..i} (k + alpha) / (k + 1), gamma_0 = 1."""
+
+def render_settings_defaults() -> dict[str, Any]:
+    """Every settings key the core parses, with its default (RenderSettings): enums by name; unset
+    schedule values and zeros that mean none (budgets, checkpoint intervals) as None."""

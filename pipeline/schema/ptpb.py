@@ -1,4 +1,9 @@
-"""Settings of our Progressive Transient Photon Beams renderer (render/core/DESIGN.md §6 "Proposed keys")."""
+"""Settings of our Progressive Transient Photon Beams renderer (render/core/DESIGN.md §6 "Proposed keys").
+
+A setting the core takes as it is has its default in the core (RenderSettings in
+render/core/include/ptpb/settings.hpp, read here as CORE_DEFAULTS); this schema adds its description, range
+and unit. The kernel radii are in the user's units here and resolved to metres in render/ptpb/settings.py
+(tests/ptpb/test_settings_home.py keeps the two sides equal)."""
 
 from __future__ import annotations
 
@@ -7,6 +12,9 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from pipeline.schema.base import StrictModel
+from render import _core
+
+CORE_DEFAULTS = _core.render_settings_defaults()
 
 
 class BeamRadius(StrictModel):
@@ -36,18 +44,23 @@ class PTPBConfig(StrictModel):
     """Our PTPB renderer: light paths per iteration, bandwidth schedules, kernels and budgets."""
 
     iterations: int = Field(
-        64, ge=1, description="Number of progressive iterations (upper bound unless a time budget is set) [-]."
+        CORE_DEFAULTS["iterations"],
+        ge=1,
+        description="Number of progressive iterations (upper bound unless a time budget is set) [-].",
     )
     time_budget_s: float | None = Field(
-        None,
+        CORE_DEFAULTS["time_budget_s"],
         gt=0,
         description="Wall-clock budget; when set it overrides `iterations` (stops after the iteration in flight) [s].",
     )
     light_paths_per_iteration: int = Field(
-        20000, ge=1, lt=2**32, description="M: light paths launched per iteration; every sum is divided by M [-]."
+        CORE_DEFAULTS["light_paths_per_iteration"],
+        ge=1,
+        lt=2**32,
+        description="M: light paths launched per iteration; every sum is divided by M [-].",
     )
     alpha: float | None = Field(
-        None,
+        CORE_DEFAULTS["alpha"],
         gt=0,
         le=1,
         description="Kernel-volume schedule parameter; null picks 2/3 for gate and 4/5 for bins/steady [-].",
@@ -65,53 +78,59 @@ class PTPBConfig(StrictModel):
         description="r_0, the initial 2D disk kernel radius of the surface photons on diffuse surfaces (render/core/DESIGN.md §7) [see unit].",
     )
     surface_alpha: float | None = Field(
-        None,
+        CORE_DEFAULTS["surface_alpha"],
         gt=0,
         le=1,
         description="Surface kernel-volume schedule parameter; null picks 4/7 for gate (r and T shrink as gamma^(1/3)) "
         "and 2/3 for bins/steady (r shrinks as gamma^(1/2)) [-].",
     )
     surface_normal_cos: float = Field(
-        0.9,
+        CORE_DEFAULTS["surface_normal_cos"],
         gt=0,
         le=1,
         description="A surface photon counts only where its normal and the shading normal have at least this cosine [-].",
     )
     spatial_kernel: Literal["box", "epanechnikov"] = Field(
-        "epanechnikov",
+        CORE_DEFAULTS["spatial_kernel"],
         description="Spatial kernel: 1D k_R of the beams and the matching 2D disk kernel of the surface photons [-].",
     )
     temporal_kernel: Literal["box", "epanechnikov", "quintic"] = Field(
-        "epanechnikov", description="Temporal kernel K_T of gate mode [-]."
+        CORE_DEFAULTS["temporal_kernel"], description="Temporal kernel K_T of gate mode [-]."
     )
     photon_beam_kind: Literal["long", "short"] = Field(
-        "long", description="Photon beams run to the boundary (long) or to the next vertex (short) [-]."
+        CORE_DEFAULTS["photon_beam_kind"],
+        description="Photon beams run to the boundary (long) or to the next vertex (short) [-].",
     )
-    query_beam_kind: Literal["long", "short"] = Field("long", description="Camera query segments, long or short [-].")
+    query_beam_kind: Literal["long", "short"] = Field(
+        CORE_DEFAULTS["query_beam_kind"], description="Camera query segments, long or short [-]."
+    )
     parallel_guard_sin2: float = Field(
-        1e-5, ge=0, lt=1, description="Pairs with sin^2(theta) below this are skipped [-]."
+        CORE_DEFAULTS["parallel_guard_sin2"],
+        ge=0,
+        lt=1,
+        description="Pairs with sin^2(theta) below this are skipped [-].",
     )
     medium_estimator: Literal["auto", "beams", "paths"] = Field(
-        "auto",
+        CORE_DEFAULTS["medium_estimator"],
         description="Estimator of light scattered in media (render/core/DESIGN.md §12): beams; camera paths with "
         "next-event estimation; or auto, which in each iteration path-traces a medium whose shortest mean free path "
         "is below R_i / beam_radius_mfp and keeps beams in the others [-].",
     )
     beam_radius_mfp: float = Field(
-        0.1,
+        CORE_DEFAULTS["beam_radius_mfp"],
         gt=0,
         description="With medium_estimator auto, a medium keeps beams while R_i is at most this many of its mean free "
         "paths; beams are biased low by about 0.2 R_i sigma_t near lit faces (render/core/DESIGN.md §12) [-].",
     )
     dense_optical_radius: float = Field(
-        50.0,
+        CORE_DEFAULTS["dense_optical_radius"],
         gt=0,
         description="With medium_estimator auto, a medium whose largest sigma_t times the scene's bounding radius "
         "exceeds this is path-traced at any radius: its light paths make hundreds of collisions and its beams are "
         "a few mean free paths long, too short to share between pixels (render/core/DESIGN.md §12) [-].",
     )
     path_max_survival: float = Field(
-        0.999,
+        CORE_DEFAULTS["path_max_survival"],
         gt=0,
         lt=1,
         description="Russian roulette of path-traced camera paths keeps a path with min(this, throughput); dense, "
@@ -119,7 +138,7 @@ class PTPBConfig(StrictModel):
         "the auto-depth reference within 1 % in fresh snow, the highest albedo of any preset (DESIGN.md §12) [-].",
     )
     path_splits: int = Field(
-        0,
+        CORE_DEFAULTS["path_splits"],
         ge=0,
         le=8,  # kMaxPathSplits in render/core/include/ptpb/settings.hpp
         description="Splitting in time for path-traced camera paths in bins and gate films: a path doubles this many "
@@ -129,7 +148,7 @@ class PTPBConfig(StrictModel):
         "tail under the sun: the demo uses 3); costs where they are not (render/core/DESIGN.md §12) [-].",
     )
     path_hops: bool = Field(
-        True,
+        CORE_DEFAULTS["path_hops"],
         description="Shell transport for path-traced camera paths in isotropically scattering media: deep in the "
         "medium a walk crosses a surface-free ball in one step drawn from tabulated exit laws (path length, "
         "direction, collisions), with its time and absorption exact; one of the skipped events, weighted to stand "
@@ -140,27 +159,36 @@ class PTPBConfig(StrictModel):
     # In a pipeline config the next four come from scene.max_depth, scene.rr_depth and the root's seed and
     # threads (pipeline/schema/__init__.py refuses them here); they are fields for direct use of the API.
     max_depth: int = Field(
-        -1, ge=-1, description="Mitsuba's max_depth: non-null interactions + 1; -1 unbounded (API use only) [-]."
+        CORE_DEFAULTS["max_depth"],
+        ge=-1,
+        description="Mitsuba's max_depth: non-null interactions + 1; -1 unbounded (API use only) [-].",
     )
-    rr_depth: int = Field(8, ge=1, description="Depth from which Russian roulette applies (API use only) [-].")
-    seed: int = Field(0, ge=0, description="Key of every random stream (API use only) [-].")
-    threads: int = Field(0, ge=0, description="Worker threads; 0 uses every core (API use only) [-].")
+    rr_depth: int = Field(
+        CORE_DEFAULTS["rr_depth"], ge=1, description="Depth from which Russian roulette applies (API use only) [-]."
+    )
+    seed: int = Field(CORE_DEFAULTS["seed"], ge=0, description="Key of every random stream (API use only) [-].")
+    threads: int = Field(
+        CORE_DEFAULTS["threads"], ge=0, description="Worker threads; 0 uses every core (API use only) [-]."
+    )
     accel: Literal["grid", "embree"] = Field(
-        "embree",
+        CORE_DEFAULTS["accel"],
         description="Beam query structure: uniform grid of diced beams, or an Embree BVH over the same pieces [-].",
     )
-    grid_resolution: int = Field(32, ge=1, le=1024, description="Grid cells along the longest axis [-].")
+    grid_resolution: int = Field(
+        CORE_DEFAULTS["grid_resolution"], ge=1, le=1024, description="Grid cells along the longest axis [-]."
+    )
     transmittance_cutoff: float = Field(
-        1e-4,
+        CORE_DEFAULTS["transmittance_cutoff"],
         gt=0,
         lt=1,
         description="Long beams and queries end where the largest channel transmittance falls below this [-].",
     )
     camera_unwarp: bool = Field(
-        False, description="Remove camera-side OPL from tau (never compare such frames with mitransient) [-]."
+        CORE_DEFAULTS["camera_unwarp"],
+        description="Remove camera-side OPL from tau (never compare such frames with mitransient) [-].",
     )
     snapshot_every: int = Field(
-        8,
+        CORE_DEFAULTS["snapshot_every"],
         ge=0,
         description="Keep the steady average every k iterations for error-against-time curves (0: never) [-].",
     )
@@ -168,19 +196,19 @@ class PTPBConfig(StrictModel):
         None, description="Overrides the film's frame_mode when set [-]."
     )
     checkpoint_every_iterations: int = Field(
-        0,
+        CORE_DEFAULTS["checkpoint_every_iterations"],
         ge=0,
         description="Save the accumulated render (double sums, counters, snapshots) to runs/<name>/.render.checkpoint/ "
         "every k iterations, so that `pipeline run --resume` continues an interrupted render with the same bits "
         "(0: never) [-].",
     )
     checkpoint_every_s: float | None = Field(
-        None,
+        CORE_DEFAULTS["checkpoint_every_s"],
         gt=0,
         description="Also save a checkpoint when this much wall time has passed since the last one (null: never) [s].",
     )
     memory_budget_gib: float | None = Field(
-        8.0,
+        CORE_DEFAULTS["memory_budget_gib"],
         gt=0,
         description="Peak image buffers of one render pass. They take about 4 bytes per value of temporal_bins x "
         "height x width x 3 (float32 frame sums; 8 in a shard, which sums in float64) plus 36 per pixel value for "

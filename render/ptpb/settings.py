@@ -1,13 +1,31 @@
 """The core's settings dict from a ``render`` config section: every length resolved to metres.
 
-The rules for the start radius and the temporal half-width (DESIGN.md §6) live here; the core owns the
-schedule defaults it fills in for keys that are absent (alpha, surface alpha, the surface radius)."""
+A key of the section that the core takes as it is goes through unchanged; its default is the core's
+(pipeline/schema/ptpb.py reads them). The rules for the start radius and the temporal half-width
+(DESIGN.md §6) live here; the core owns the schedule defaults it fills in for keys that are absent
+(alpha, surface alpha, the surface radius)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from pipeline.schema.ptpb import BeamRadius, PTPBConfig, TimeHalfWidth
+
+# Core settings keys that a render section gives in its own units, resolved to metres by resolve_settings.
+RESOLVED_KEYS = {
+    "initial_beam_radius": "render.initial_beam_radius (m, scene radii or pixel footprints)",
+    "initial_time_half_width": "render.initial_time_half_width (m of OPL, bins or n R_0)",
+    "initial_surface_radius": "render.initial_surface_radius (m, scene radii or pixel footprints)",
+    "initial_surface_time_half_width": "render.initial_time_half_width, with r_0 in place of R_0",
+}
+# Core settings keys that no config sets, with who sets them: overrides of render.ptpb.api.render.
+API_ONLY_KEYS = {
+    "dice_length": "tests and benchmarks (0: the core picks the beam pieces' length)",
+    "jitter": "tests that need pixel-centre rays",
+    "tile_size": "tests of the tiling",
+    "first_iteration": "render.ptpb.split.render_shard",
+    "keep_sums": "render.ptpb.split.render_shard",
+}
 
 
 def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:
@@ -76,38 +94,11 @@ def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
     bin_width = film.get("bin_width_opl", 0.003)
     t0 = _resolve_half_width(cfg.initial_time_half_width, n, r0, bin_width)
     t0_surface = _resolve_half_width(cfg.initial_time_half_width, n, r0_surface, bin_width)
-    return {
-        "iterations": cfg.iterations,
-        "time_budget_s": cfg.time_budget_s or 0.0,
-        "light_paths_per_iteration": cfg.light_paths_per_iteration,
-        "alpha": cfg.alpha,
+    resolved = {
         "initial_beam_radius": r0,
         "initial_time_half_width": t0,
         "initial_surface_radius": r0_surface,
         "initial_surface_time_half_width": t0_surface,
-        "surface_alpha": cfg.surface_alpha,
-        "surface_normal_cos": cfg.surface_normal_cos,
-        "spatial_kernel": cfg.spatial_kernel,
-        "temporal_kernel": cfg.temporal_kernel,
-        "photon_beam_kind": cfg.photon_beam_kind,
-        "query_beam_kind": cfg.query_beam_kind,
-        "parallel_guard_sin2": cfg.parallel_guard_sin2,
-        "medium_estimator": cfg.medium_estimator,
-        "beam_radius_mfp": cfg.beam_radius_mfp,
-        "dense_optical_radius": cfg.dense_optical_radius,
-        "path_max_survival": cfg.path_max_survival,
-        "path_splits": cfg.path_splits,
-        "path_hops": cfg.path_hops,
-        "max_depth": cfg.max_depth,
-        "rr_depth": cfg.rr_depth,
-        "seed": cfg.seed,
-        "threads": cfg.threads,
-        "accel": cfg.accel,
-        "grid_resolution": cfg.grid_resolution,
-        "transmittance_cutoff": cfg.transmittance_cutoff,
-        "camera_unwarp": cfg.camera_unwarp,
-        "snapshot_every": cfg.snapshot_every,
-        "checkpoint_every_iterations": cfg.checkpoint_every_iterations,
-        "checkpoint_every_s": cfg.checkpoint_every_s or 0.0,
-        "memory_budget_gib": cfg.memory_budget_gib,
     }
+    as_given = {key: getattr(cfg, key) for key in type(cfg).model_fields if key not in {*RESOLVED_KEYS, "frame_mode"}}
+    return as_given | resolved

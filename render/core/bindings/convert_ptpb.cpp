@@ -51,7 +51,43 @@ Vec3d vec3(const py::dict& d, const char* key, const Vec3d& fallback, const std:
 }
 
 template <typename E>
-E choose(const std::string& value, std::initializer_list<std::pair<const char*, E>> options, const std::string& key) {
+using EnumNames = std::vector<std::pair<const char*, E>>;
+
+// How a settings dict spells each enum of RenderSettings.
+const EnumNames<SpatialKernel>& names(SpatialKernel) {
+  static const EnumNames<SpatialKernel> n{{"box", SpatialKernel::Box}, {"epanechnikov", SpatialKernel::Epanechnikov}};
+  return n;
+}
+const EnumNames<TemporalKernel>& names(TemporalKernel) {
+  static const EnumNames<TemporalKernel> n{{"box", TemporalKernel::Box},
+                                           {"epanechnikov", TemporalKernel::Epanechnikov},
+                                           {"quintic", TemporalKernel::Quintic}};
+  return n;
+}
+const EnumNames<BeamKind>& names(BeamKind) {
+  static const EnumNames<BeamKind> n{{"long", BeamKind::Long}, {"short", BeamKind::Short}};
+  return n;
+}
+const EnumNames<MediumEstimator>& names(MediumEstimator) {
+  static const EnumNames<MediumEstimator> n{
+      {"auto", MediumEstimator::Auto}, {"beams", MediumEstimator::Beams}, {"paths", MediumEstimator::Paths}};
+  return n;
+}
+const EnumNames<AccelKind>& names(AccelKind) {
+  static const EnumNames<AccelKind> n{{"grid", AccelKind::Grid}, {"embree", AccelKind::Embree}};
+  return n;
+}
+
+template <typename E>
+std::string name_of(E value) {
+  for (const auto& [name, e] : names(value))
+    if (e == value) return name;
+  throw std::logic_error("an enum value without a name in convert_ptpb.cpp");
+}
+
+// The enum that ``value`` names among ``options`` (a braced list of name, enum pairs, or names(E{})).
+template <typename E, typename Options = std::initializer_list<std::pair<const char*, E>>>
+E choose(const std::string& value, const Options& options, const std::string& key) {
   std::string names;
   for (const auto& [name, e] : options) {
     if (value == name) return e;
@@ -59,6 +95,11 @@ E choose(const std::string& value, std::initializer_list<std::pair<const char*, 
   }
   throw std::invalid_argument(key + " must be one of " + names + ", got '" + value + "'");
 }
+
+template <typename T>
+struct IsOptional : std::false_type {};
+template <typename T>
+struct IsOptional<std::optional<T>> : std::true_type {};
 
 // A number that may be missing or None: then unset, and the core resolves its default.
 std::optional<double> optional_number(const py::dict& d, const char* key, const std::string& where) {
@@ -262,61 +303,43 @@ Scene parse_scene(const py::dict& d) {
 
 RenderSettings parse_settings(const py::dict& d) {
   const std::string w = "settings";
+  // Every length of the schedule follows from R_0, and no default of it would suit a caller's scene.
+  if (!d.contains("initial_beam_radius")) throw std::invalid_argument(w + ".initial_beam_radius is required");
   RenderSettings s;
-  s.iterations = get<int>(d, "iterations", s.iterations, w);
-  s.time_budget_s = get<double>(d, "time_budget_s", 0.0, w);
-  s.light_paths_per_iteration = get<std::uint64_t>(d, "light_paths_per_iteration", s.light_paths_per_iteration, w);
-  // The schedule's defaults belong to the core (resolve_schedule): missing or None leaves them unset.
-  s.alpha = optional_number(d, "alpha", w);
-  s.initial_beam_radius = require_key<double>(d, "initial_beam_radius", w);
-  s.initial_time_half_width = optional_number(d, "initial_time_half_width", w);
-  s.initial_surface_radius = optional_number(d, "initial_surface_radius", w);
-  s.initial_surface_time_half_width = optional_number(d, "initial_surface_time_half_width", w);
-  s.surface_alpha = optional_number(d, "surface_alpha", w);
-  s.surface_normal_cos = get<double>(d, "surface_normal_cos", s.surface_normal_cos, w);
-  s.spatial_kernel = choose<SpatialKernel>(get<std::string>(d, "spatial_kernel", "epanechnikov", w),
-                                           {{"box", SpatialKernel::Box}, {"epanechnikov", SpatialKernel::Epanechnikov}},
-                                           "spatial_kernel");
-  s.temporal_kernel = choose<TemporalKernel>(get<std::string>(d, "temporal_kernel", "epanechnikov", w),
-                                             {{"box", TemporalKernel::Box},
-                                              {"epanechnikov", TemporalKernel::Epanechnikov},
-                                              {"quintic", TemporalKernel::Quintic}},
-                                             "temporal_kernel");
-  s.photon_beam_kind = choose<BeamKind>(get<std::string>(d, "photon_beam_kind", "long", w),
-                                        {{"long", BeamKind::Long}, {"short", BeamKind::Short}}, "photon_beam_kind");
-  s.query_beam_kind = choose<BeamKind>(get<std::string>(d, "query_beam_kind", "long", w),
-                                       {{"long", BeamKind::Long}, {"short", BeamKind::Short}}, "query_beam_kind");
-  s.parallel_guard_sin2 = get<double>(d, "parallel_guard_sin2", s.parallel_guard_sin2, w);
-  s.medium_estimator = choose<MediumEstimator>(
-      get<std::string>(d, "medium_estimator", "auto", w),
-      {{"auto", MediumEstimator::Auto}, {"beams", MediumEstimator::Beams}, {"paths", MediumEstimator::Paths}},
-      "medium_estimator");
-  s.beam_radius_mfp = get<double>(d, "beam_radius_mfp", s.beam_radius_mfp, w);
-  s.dense_optical_radius = get<double>(d, "dense_optical_radius", s.dense_optical_radius, w);
-  s.path_max_survival = get<double>(d, "path_max_survival", s.path_max_survival, w);
-  s.path_splits = get<int>(d, "path_splits", s.path_splits, w);
-  s.path_hops = get<bool>(d, "path_hops", s.path_hops, w);
-  s.max_depth = get<int>(d, "max_depth", s.max_depth, w);
-  s.rr_depth = get<int>(d, "rr_depth", s.rr_depth, w);
-  s.seed = get<std::uint64_t>(d, "seed", 0, w);
-  s.threads = get<int>(d, "threads", 0, w);
-  s.accel = choose<AccelKind>(get<std::string>(d, "accel", "embree", w),
-                              {{"grid", AccelKind::Grid}, {"embree", AccelKind::Embree}}, "accel");
-  s.grid_resolution = get<int>(d, "grid_resolution", s.grid_resolution, w);
-  s.dice_length = get<double>(d, "dice_length", 0.0, w);
-  s.jitter = get<bool>(d, "jitter", true, w);
-  s.camera_unwarp = get<bool>(d, "camera_unwarp", false, w);
-  s.transmittance_cutoff = get<double>(d, "transmittance_cutoff", s.transmittance_cutoff, w);
-  s.tile_size = get<int>(d, "tile_size", s.tile_size, w);
-  s.snapshot_every = get<int>(d, "snapshot_every", 0, w);
-  s.checkpoint_every_iterations = get<int>(d, "checkpoint_every_iterations", 0, w);
-  s.checkpoint_every_s = get<double>(d, "checkpoint_every_s", 0.0, w);
-  s.first_iteration = get<int>(d, "first_iteration", 0, w);
-  s.keep_sums = get<bool>(d, "keep_sums", false, w);
-  // None: no limit (the config's null).
-  if (d.contains("memory_budget_gib"))
-    s.memory_budget_gib = d["memory_budget_gib"].is_none() ? 0.0 : get<double>(d, "memory_budget_gib", 0.0, w);
+  for_each_setting(s, [&](const char* key, auto& value, auto... zero_means_none) {
+    using T = std::decay_t<decltype(value)>;
+    if constexpr (sizeof...(zero_means_none) > 0) {
+      if (d.contains(key) && d[key].is_none()) {
+        value = T{0};
+        return;
+      }
+    }
+    if constexpr (IsOptional<T>::value) {
+      // The schedule's defaults belong to the core (resolve_schedule): None leaves them unset.
+      if (d.contains(key)) value = optional_number(d, key, w);
+    } else if constexpr (std::is_enum_v<T>) {
+      value = choose<T>(get<std::string>(d, key, name_of(value), w), names(T{}), key);
+    } else {
+      value = get<T>(d, key, value, w);
+    }
+  });
   return s;
+}
+
+py::dict settings_defaults_dict() {
+  const RenderSettings s;
+  py::dict out;
+  for_each_setting(s, [&](const char* key, const auto& value, auto... zero_means_none) {
+    using T = std::decay_t<decltype(value)>;
+    if constexpr (sizeof...(zero_means_none) > 0) {
+      out[key] = value == T{0} ? py::none() : py::cast(value);
+    } else if constexpr (std::is_enum_v<T>) {
+      out[key] = name_of(value);
+    } else {
+      out[key] = py::cast(value);  // an unset optional is None
+    }
+  });
+  return out;
 }
 
 py::dict stats_dict(const RenderStats& s) {

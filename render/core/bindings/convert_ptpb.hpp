@@ -15,7 +15,10 @@ namespace ptpb_bindings {
 namespace py = pybind11;
 
 ptpb::Scene parse_scene(const py::dict& d);
+// The settings by the keys of ptpb::for_each_setting; a key left out keeps its default.
 ptpb::RenderSettings parse_settings(const py::dict& d);
+// Those keys with RenderSettings' defaults: enums by name, unset optionals and ZeroMeansNone's zeros as None.
+py::dict settings_defaults_dict();
 
 // The counters and timings a result's "stats" dict and a checkpoint state carry.
 py::dict stats_dict(const ptpb::RenderStats& s);
