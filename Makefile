@@ -55,9 +55,10 @@ lint: setup ## Lint and format checks (ruff, clang-format) and type checks (mypy
 	clang-format --dry-run --Werror $(CORE_FORMATTED)
 	$(VENV)/bin/mypy
 
-# The documentation site (mkdocs.yml) in build/site; --strict fails on a broken link, anchor or include.
+# The documentation site (mkdocs.yml) in build/site; --strict fails on a broken link, anchor or include. Its log
+# is shown only on failure: --quiet would hide the warnings from --strict too, and the build would pass.
 docs: setup ## Build the documentation site into build/site (open build/site/index.html); make test runs it
-	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet --site-dir build/site
+	@log=$$(NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir build/site 2>&1) || { echo "$$log"; exit 1; }
 
 # pytest runs in TEST_JOBS processes (pytest-xdist), one test file per process at a time, so a file's
 # module fixtures are built once; tests render a fixed number of iterations, never against the clock, so a
