@@ -78,7 +78,7 @@ def ours(scene_dir: Path, cfg, seconds: float) -> tuple[np.ndarray, dict]:
             "snapshot_every": 0,
             "frame_mode": "bins",
             "max_depth": cfg.scene.max_depth,
-            "rr_depth": cfg.scene.rr_depth,
+            "rr_depth": cfg.render.rr_depth,
         }
     )
     result = render(load_scene(scene_dir), settings)
@@ -200,7 +200,7 @@ def main() -> None:
         # The same with the reference's missed noise taken out of every error, where the tiled baseline renders
         # exactly as the reference (same roulette and tiles, all channels at once); NaN otherwise.
         floors = (math.nan, math.nan)
-        if tuned_rr == (set_rr or cfg.scene.rr_depth) and not per_channel:
+        if tuned_rr == (set_rr or cfg.render.rr_depth) and not per_channel:
             tiled = measured["tuned_tiled"]
             floors = (
                 missed_reference_noise(tiled.relmse, tiled.spp, ref.spp, error.reference_noise),

@@ -59,7 +59,7 @@ def render_writes(config) -> int:
     """Our render's large arrays: frames.npy, steady.npy and .exr, snapshots.npz, and the checkpoint (the
     frame sums and six steady-sized float64 sums, twice while a new checkpoint replaces the last)."""
     r = config.render
-    frames = 0 if (r.frame_mode or config.scene.film.frame_mode) == "steady" else film_bytes(config)
+    frames = 0 if r.frame_mode == "steady" else film_bytes(config)
     image = image_bytes(config)
     snapshots = r.iterations // r.snapshot_every * image if r.snapshot_every else 0
     checkpoint = 2 * (frames + 6 * image) if r.checkpoint_every_iterations or r.checkpoint_every_s else 0
@@ -170,7 +170,7 @@ STAGES: list[Stage] = [
     Stage(
         "render",
         render_stage,
-        ("render", "seed", "threads", "scene.max_depth", "scene.rr_depth"),
+        ("render", "seed", "threads", "scene.max_depth"),
         upstream=("scene",),
         description="our PTPB render: steady image, frames and statistics",
         enabled=_views,

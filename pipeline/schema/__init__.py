@@ -25,7 +25,6 @@ BORROWED_RENDER_KEYS = {
     "seed": "seed",
     "threads": "threads",
     "max_depth": "scene.max_depth",
-    "rr_depth": "scene.rr_depth",
 }
 
 
@@ -54,7 +53,7 @@ class Config(StrictModel):
     render: PTPBConfig = Field(
         default_factory=PTPBConfig,
         description="The render stage: our PTPB renderer (seed and threads come from the root, the path depth "
-        "from scene.max_depth and scene.rr_depth).",
+        "from scene.max_depth).",
     )
     composite: CompositeConfig = Field(
         default_factory=CompositeConfig,
@@ -71,13 +70,12 @@ class Config(StrictModel):
 
     def render_settings(self) -> PTPBConfig:
         """The render section with the keys it takes from elsewhere: the root's seed and threads, and the
-        path depth of the scene, which the reference renders with too."""
+        path depth of the scene, which the references render with too."""
         return self.render.model_copy(
             update={
                 "seed": self.seed,
                 "threads": self.threads,
                 "max_depth": self.scene.max_depth,
-                "rr_depth": self.scene.rr_depth,
             }
         )
 

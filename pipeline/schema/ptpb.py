@@ -156,15 +156,18 @@ class PTPBConfig(StrictModel):
         "walk "
         "(render/core/DESIGN.md §12, 'Hops') [-].",
     )
-    # In a pipeline config the next four come from scene.max_depth, scene.rr_depth and the root's seed and
-    # threads (pipeline/schema/__init__.py refuses them here); they are fields for direct use of the API.
+    # In a pipeline config max_depth, seed and threads come from scene.max_depth and the root's seed and threads
+    # (pipeline/schema/__init__.py refuses them here); they are fields for direct use of the API.
     max_depth: int = Field(
         CORE_DEFAULTS["max_depth"],
         ge=-1,
         description="Mitsuba's max_depth: non-null interactions + 1; -1 unbounded (API use only) [-].",
     )
     rr_depth: int = Field(
-        CORE_DEFAULTS["rr_depth"], ge=1, description="Depth from which Russian roulette applies (API use only) [-]."
+        CORE_DEFAULTS["rr_depth"],
+        ge=1,
+        description="Depth from which the Russian roulette of our renderer's paths starts; path-traced camera paths "
+        "then survive with min(path_max_survival, throughput). The references have their own, reference.rr_depth [-].",
     )
     seed: int = Field(CORE_DEFAULTS["seed"], ge=0, description="Key of every random stream (API use only) [-].")
     threads: int = Field(
@@ -193,7 +196,10 @@ class PTPBConfig(StrictModel):
         description="Keep the steady average every k iterations for error-against-time curves (0: never) [-].",
     )
     frame_mode: Literal["steady", "bins", "gate"] | None = Field(
-        None, description="Overrides the film's frame_mode when set [-]."
+        None,
+        description="What our frames hold: bins, integrals over each bin (as mitransient's, whose frames are always "
+        "bins); gate, densities per metre of OPL at the bin centres, with the temporal kernel; steady, the steady "
+        "image only. null: bins for a transient film, steady for a steady one (scene.film.mode) [-].",
     )
     checkpoint_every_iterations: int = Field(
         CORE_DEFAULTS["checkpoint_every_iterations"],

@@ -283,13 +283,16 @@ class ObjectConfig(StrictModel):
 class FilmConfig(StrictModel):
     """Film and time axis (mitransient's names; key path scene.film.<field>)."""
 
+    moved_keys = {
+        "frame_mode": "scene.film.frame_mode has moved to render.frame_mode: only our renderer reads it (the "
+        "references' frames are always bins), so it sits with the other keys of our estimator. Move the line to the "
+        "render section (render: {frame_mode: gate}); for bins, the default, delete it",
+    }
+
     mode: Literal["steady", "transient"] = Field("transient", description="Steady image only, or frames as well [-].")
     temporal_bins: int = Field(40, ge=1, le=100000, description="Number of frames F [-].")
     start_opl: float = Field(10.0, description="OPL where frame 0 begins [m].")
     bin_width_opl: float = Field(0.5, gt=0, description="Frame spacing Delta, in OPL [m].")
-    frame_mode: Literal["bins", "gate"] = Field(
-        "bins", description="bins: integrals over each bin (mitransient); gate: densities per metre at bin centres [-]."
-    )
     window: Literal["manual", "auto"] = Field(
         "auto",
         description="manual: start_opl and bin_width_opl as given; auto: the scene stage fits the window to the "
@@ -320,6 +323,12 @@ def _default_objects() -> list[ObjectConfig]:
 class SceneConfig(StrictModel):
     """The neutral scene: what both renderers see (key path scene.<field>)."""
 
+    moved_keys = {
+        "rr_depth": "scene.rr_depth has moved to render.rr_depth: only our renderer reads it (the references start "
+        "their roulette at reference.rr_depth, auto by default). Move the line to the render section "
+        "(render: {rr_depth: 5})",
+    }
+
     camera: CameraConfig = Field(default_factory=CameraConfig, description="The camera [-].")
     sun: SunConfig = Field(default_factory=SunConfig, description="The sun [-].")
     sky: SkyConfig = Field(default_factory=SkyConfig, description="The constant sky [-].")
@@ -334,7 +343,6 @@ class SceneConfig(StrictModel):
         le=100000,
         description="Mitsuba's meaning: non-null interactions on the path plus one; -1 = unbounded [-].",
     )
-    rr_depth: int = Field(8, ge=1, le=100000, description="Depth from which Russian roulette starts [-].")
 
     @model_validator(mode="after")
     def _references_exist(self) -> SceneConfig:
@@ -390,14 +398,14 @@ class ReferenceConfig(StrictModel):
         description="Wall-clock budget per reference; overrides spp, stopping after the pass that "
         "would overrun it [s].",
     )
-    rr_depth: Annotated[int, Field(ge=1, le=1_000_000)] | Literal["auto"] | None = Field(
+    rr_depth: Annotated[int, Field(ge=1, le=1_000_000)] | Literal["auto"] = Field(
         "auto",
         description="Depth (collisions) from which Mitsuba's and mitransient's roulette starts. Their roulette keeps "
         "a path with at most 0.95 a collision, so in dense, high-albedo snow a shallow start leaves the long paths "
         "almost never sampled and the references dark (1-3 % in fresh snow from 3000). auto: the depth at which "
         "each medium's channel is expected to leave out at most 0.25 % of its light, from exact half-space "
         "transport (render/scene/roulette.py; render/core/DESIGN.md §12, *Roulette depth from the medium*); an "
-        "integer sets it (a warning when it is expected to leave out over 0.5 %); null = scene.rr_depth [-].",
+        "integer sets it (a warning when it is expected to leave out over 0.5 %) [-].",
     )
     tiles: int = Field(
         4,
@@ -427,6 +435,16 @@ class ReferenceConfig(StrictModel):
         description="Render even when a delta light shines through a smooth dielectric (the medium renders "
         "black in Mitsuba) [-].",
     )
+
+    @field_validator("rr_depth", mode="before")
+    @classmethod
+    def _null_depth_moved(cls, rr_depth: object) -> object:
+        if rr_depth is None:
+            raise ValueError(
+                "null meant scene.rr_depth, which has moved to render.rr_depth (our renderer's); give the "
+                "references' depth as an integer (the same as render.rr_depth to keep what null did) or auto"
+            )
+        return rr_depth
 
 
 __all__ = [

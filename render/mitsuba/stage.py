@@ -38,14 +38,13 @@ class _PassOptions(TypedDict):
 
 def reference_roulette(scene: Scene, cfg: ReferenceConfig) -> tuple[RouletteDepth, str]:
     """The references' roulette depth for ``scene`` and what it is expected to leave out, with where the depth
-    came from: ``auto`` (chosen from the media), ``reference.rr_depth`` or ``scene.rr_depth``."""
+    came from: ``auto`` (chosen from the media) or ``reference.rr_depth``."""
     media = {name: reduced_channels(m.sigma_s, m.sigma_a, [m.g] * 3) for name, m in scene.media.items()}
     samples = min(cfg.spp, cfg.transient_spp or cfg.spp)
     if cfg.rr_depth == "auto":
         return auto_rr_depth(media, MITSUBA_SURVIVAL_CAP, samples), "auto"
-    depth, source = (scene.rr_depth, "scene.rr_depth") if cfg.rr_depth is None else (cfg.rr_depth, "reference.rr_depth")
-    missed, where = worst_missed(media, depth, MITSUBA_SURVIVAL_CAP, samples)
-    return RouletteDepth(rr_depth=depth, missed=missed, medium=where), source
+    missed, where = worst_missed(media, cfg.rr_depth, MITSUBA_SURVIVAL_CAP, samples)
+    return RouletteDepth(rr_depth=cfg.rr_depth, missed=missed, medium=where), "reference.rr_depth"
 
 
 def reference_scene(scene_dir: Path, cfg: ReferenceConfig) -> Scene:

@@ -18,6 +18,8 @@ RESOLVED_KEYS = {
     "initial_surface_radius": "render.initial_surface_radius (m, scene radii or pixel footprints)",
     "initial_surface_time_half_width": "render.initial_time_half_width, with r_0 in place of R_0",
 }
+# Keys of a render section that go into the core's scene dict, not its settings, with where.
+SCENE_KEYS = {"frame_mode": "render.ptpb.api.core_inputs, into the film (scene['film']['frame_mode'])"}
 # Core settings keys that no config sets, with who sets them: overrides of render.ptpb.api.render.
 API_ONLY_KEYS = {
     "dice_length": "tests and benchmarks (0: the core picks the beam pieces' length)",
@@ -100,5 +102,5 @@ def resolve_settings(scene: dict, cfg: PTPBConfig) -> dict:
         "initial_surface_radius": r0_surface,
         "initial_surface_time_half_width": t0_surface,
     }
-    as_given = {key: getattr(cfg, key) for key in type(cfg).model_fields if key not in {*RESOLVED_KEYS, "frame_mode"}}
+    as_given = {key: getattr(cfg, key) for key in type(cfg).model_fields if key not in {*RESOLVED_KEYS, *SCENE_KEYS}}
     return as_given | resolved

@@ -408,7 +408,6 @@ def fit_window(film: FilmConfig, arrivals: np.ndarray) -> Film:
         temporal_bins=film.temporal_bins if film.mode == "transient" else 1,
         start_opl=float(start),
         bin_width_opl=float(width),
-        frame_mode=film.frame_mode,
     )
 
 
@@ -515,7 +514,6 @@ def build_scene(
         shapes=scene_shapes + emitters,
         lights=lights,
         max_depth=cfg.max_depth,
-        rr_depth=cfg.rr_depth,
         bounding_sphere={"center": [float(v) for v in centre], "radius": radius},
         notes=notes,
     )

@@ -29,7 +29,7 @@ def test_every_preset_on_disk_validates():
 
 @pytest.mark.parametrize(
     ("key", "home"),
-    [("seed", "seed"), ("threads", "threads"), ("max_depth", "scene.max_depth"), ("rr_depth", "scene.rr_depth")],
+    [("seed", "seed"), ("threads", "threads"), ("max_depth", "scene.max_depth")],
 )
 def test_render_keys_with_another_home_are_refused(key, home):
     with pytest.raises(ConfigError, match=rf"render\.{key} cannot be set in a pipeline config: set `{home}`"):
@@ -37,12 +37,12 @@ def test_render_keys_with_another_home_are_refused(key, home):
 
 
 def test_the_render_stage_gets_the_root_seed_threads_and_the_scene_depth():
-    config = load_config(DEMO, ["seed=11", "threads=1", "scene.max_depth=-1", "scene.rr_depth=12"])
+    config = load_config(DEMO, ["seed=11", "threads=1", "scene.max_depth=-1", "render.rr_depth=12"])
     settings = config.render_settings()
     assert (settings.seed, settings.threads, settings.max_depth, settings.rr_depth) == (11, 1, -1, 12)
     # A dump leaves the borrowed keys out, so it validates again (sweeps write point configs this way).
     dump = config.model_dump(mode="json")
-    assert not {"seed", "threads", "max_depth", "rr_depth"} & set(dump["render"])
+    assert not {"seed", "threads", "max_depth"} & set(dump["render"])
     assert type(config).model_validate(dump).render_settings() == settings
 
 

@@ -28,7 +28,7 @@ scene:
     - {name: cube, shape: box, medium: snow}
   sun: {elevation_deg: 45.0, kind: directional}
   camera: {width: 16, height: 12}
-  film: {mode: transient, temporal_bins: 6, frame_mode: bins, window: auto}
+  film: {mode: transient, temporal_bins: 6, window: auto}
 render: {iterations: 2, light_paths_per_iteration: 1000}
 reference: {steady: false, transient: false}
 composite: {video_min_height: 64}
