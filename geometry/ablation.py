@@ -444,6 +444,7 @@ class GrowthSettings:
     slope_order: int = 2  # 2: second-order (minmod ENO) slopes, 1: first-order upwind (DESIGN.md 6.1)
     melt_gain_threshold: float = 1.0  # melt needs absorbed flux above this x sky_loss x V_sky; 0 = off (3.9)
     meteorology: energy.Meteorology | None = None  # set: the surface energy balance replaces sky_loss (3.9)
+    still_air_shelter_deg: float = 15.0  # theta_v: ventilation 1 - Sx / tan(theta_v) of the balance [deg]
 
 
 @dataclass
@@ -550,13 +551,13 @@ def constant_loss_kept(
 
 
 def ventilation(horizons: irradiance.Horizons, s: GrowthSettings) -> np.ndarray:
-    """Share of the open field's wind that reaches each cell [-]: 1 - Sx / tan(theta_m), the complement of the
-    shelter switch (DESIGN.md 3.9), so still air is where the switch melts."""
-    return 1.0 - sheltered_melt_fraction(horizons.shelter, s.shelter_full_melt_deg)
+    """Share of the open field's wind that reaches each cell [-]: clip(1 - Sx / tan(theta_v), 0, 1) from the
+    shelter index Sx of the horizons (DESIGN.md 3.9, *Ventilation*)."""
+    return 1.0 - sheltered_melt_fraction(horizons.shelter, s.still_air_shelter_deg)
 
 
 # Balance solves per period: consecutive sun positions share one, at their mean absorbed flux (DESIGN.md 3.9).
-BALANCE_STEPS_PER_PERIOD = 4
+BALANCE_STEPS_PER_PERIOD = 2
 
 
 def balance_split(
@@ -768,6 +769,7 @@ def settings_from_config(cfg) -> GrowthSettings:
         max_slope_deg=cfg.max_slope_deg,
         sky_loss=cfg.sky_loss,
         meteorology=meteorology_from_config(cfg.meteorology),
+        still_air_shelter_deg=cfg.meteorology.still_air_shelter_deg if cfg.meteorology else 15.0,
         cfl=cfg.cfl,
         snapshots=cfg.snapshots,
         slope_order=cfg.slope_order,

@@ -57,6 +57,14 @@ class MeteorologyConfig(StrictModel):
         description="Roughness length z0s for heat and vapour (Winkler et al. 2009: 1 mm on smooth ice) [m].",
     )
     surface_emissivity: float = Field(0.99, ge=0.9, le=1, description="Longwave emissivity eps_s of snow and ice [-].")
+    still_air_shelter_deg: float = Field(
+        15.0,
+        gt=0,
+        lt=90,
+        description="Ventilation of the balance: a cell gets the wind times clip(1 - Sx / tan(theta_v), 0, 1), Sx the "
+        "shelter index of the horizons beyond geometry.wake_slope, so the air is still where the surroundings rise "
+        "theta_v above the wake line on average (geometry/DESIGN.md 3.9) [estimate] [deg].",
+    )
 
     @model_validator(mode="after")
     def _check_air(self) -> MeteorologyConfig:

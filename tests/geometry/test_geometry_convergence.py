@@ -117,8 +117,10 @@ def _flat_season_energy(cfg, sky) -> float:
 def test_flat_ground_sublimates_what_it_absorbs_beyond_the_sky_loss(sky_loss):
     """The model on flat ground (ablation.flat_season_lowering) against the energy balance summed by hand: the
     ground is open to the sky, unshaded and unsheltered, so it sublimates (1 - a) x shortwave - sky_loss per day
-    at L_s. Tapado's preset over 10 days (one horizon period a day, so the day is the balance's unit)."""
-    cfg = GeometryConfig(**{**load_raw(SITES / "tapado.yaml")["geometry"], "days": 10, "sky_loss": sky_loss})
+    at L_s. Tapado's preset in the constant-loss mode (no geometry.meteorology) over 10 days (one horizon period a
+    day, so the day is the balance's unit)."""
+    raw = load_raw(SITES / "tapado.yaml")["geometry"]
+    cfg = GeometryConfig(**{**raw, "meteorology": None, "days": 10, "sky_loss": sky_loss})
     settings = ablation.settings_from_config(cfg)
     assert cfg.horizon_refreshes_per_day == 1
     expected = (
@@ -131,10 +133,11 @@ def test_flat_ground_sublimates_what_it_absorbs_beyond_the_sky_loss(sky_loss):
 
 
 def test_validate_warns_when_the_sky_loss_takes_all_the_light():
-    """DESIGN.md 7, Limits: Rio Blanco's snow (albedo 0.8) under the default 90 W m-2 sky loss does not ablate,
-    so its season grows nothing; validate and the geometry stage say so and name the keys. Without the loss the
-    same ground loses centimetres, and Tapado's ice is not warned about."""
-    rio = GeometryConfig(**{**load_raw(SITES / "rio_blanco.yaml")["geometry"], "days": 60})
+    """DESIGN.md 7, Limits: Rio Blanco's snow (albedo 0.8) under the constant-loss mode's default 90 W m-2 sky loss
+    does not ablate, so its season grows nothing; validate and the geometry stage say so and name the keys.
+    Without the loss the same ground loses centimetres, and Tapado's ice is not warned about."""
+    rio_raw = load_raw(SITES / "rio_blanco.yaml")["geometry"]
+    rio = GeometryConfig(**{**rio_raw, "meteorology": None, "days": 60})
     assert _flat_season_energy(rio, ablation.settings_from_config(rio).sky) == 0.0
     warnings = ablation.energy_warnings(rio)
     assert len(warnings) == 1 and "geometry.sky_loss = 90" in warnings[0] and "geometry.albedo = 0.8" in warnings[0]
