@@ -1,6 +1,7 @@
 """Typed stub of render._core, the C++ core (render/core/bindings): the Embree ray engine and the
 PTPB renderer. Scene and settings travel as plain dicts (built by render/ptpb/settings.py and render/ptpb/api.py); see
-render/core/bindings/convert_ptpb.cpp for their keys. Lengths are in metres, times in metres of OPL."""
+render/core/bindings/convert_ptpb.cpp for the scene's keys and for_each_setting in
+render/core/include/ptpb/settings.hpp for the settings'. Lengths are in metres, times in metres of OPL."""
 
 from collections.abc import Callable, Mapping
 from typing import Any
