@@ -40,10 +40,13 @@ def test_validate_reports_key_path_value_and_rule(tmp_path):
 
 
 def test_validate_warns_when_the_season_cannot_ablate(tmp_path):
-    """Rio Blanco's snow preset under the default sky loss: valid, but validate says the field will not grow and
-    which keys to look at (geometry/DESIGN.md 7, Limits)."""
+    """Rio Blanco's snow preset in the constant-loss mode (no meteorology) under the default sky loss: valid, but
+    validate says the field will not grow and which keys to look at (geometry/DESIGN.md 7, Limits)."""
     config = tmp_path / "rio.yaml"
-    config.write_text("extends: [presets/sites/rio_blanco.yaml]\ngeometry:\n  grid_cells: 128\n  domain_size: 4.0\n")
+    config.write_text(
+        "extends: [presets/sites/rio_blanco.yaml]\n"
+        "geometry:\n  grid_cells: 128\n  domain_size: 4.0\n  meteorology: null\n"
+    )
     result = cli("validate", str(config), cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "warning: flat ground loses 0 mm over the 40-day season: geometry.sky_loss = 90" in result.stderr
