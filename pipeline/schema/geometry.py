@@ -324,7 +324,12 @@ class GeometryConfig(StrictModel):
         if self.switch_width > self.switch_centre:
             raise ValueError("geometry.switch_width must not exceed geometry.switch_centre")
         if self.meteorology is not None:
-            both = [f"geometry.{key}" for key in CONSTANT_LOSS_KEYS if key in self.model_fields_set]
+            # A key at its default is not a choice (a dumped config carries every key), so only changed ones clash.
+            both = [
+                f"geometry.{key}"
+                for key in CONSTANT_LOSS_KEYS
+                if key in self.model_fields_set and getattr(self, key) != type(self).model_fields[key].default
+            ]
             if both:
                 raise ValueError(
                     f"{', '.join(both)} and geometry.meteorology are both set: the surface energy balance of "

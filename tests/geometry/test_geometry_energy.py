@@ -89,10 +89,15 @@ def test_walls_cut_the_longwave_loss_with_the_sky_view():
 
 
 def test_meteorology_and_the_constant_loss_cannot_both_be_set():
+    """A changed constant-loss key beside geometry.meteorology is refused, naming both and the fix; a key at its
+    default is not a choice, so a dumped config (every key present) validates again."""
     raw = load_raw(SITES / "tapado.yaml")["geometry"]
-    with pytest.raises(ValidationError, match="geometry.sky_loss and geometry.meteorology are both set"):
-        GeometryConfig(**{**raw, "sky_loss": 90.0})
-    constant = GeometryConfig(**{**raw, "meteorology": None, "sky_loss": 90.0})
+    with pytest.raises(ValidationError, match="geometry.sky_loss and geometry.meteorology are both set") as error:
+        GeometryConfig(**{**raw, "sky_loss": 110.0})
+    assert "geometry.meteorology: null" in str(error.value)
+    tapado = GeometryConfig(**raw)
+    assert GeometryConfig.model_validate(tapado.model_dump()) == tapado
+    constant = GeometryConfig(**{**raw, "meteorology": None, "sky_loss": 110.0})
     assert ablation.settings_from_config(constant).meteorology is None
 
 
