@@ -154,9 +154,11 @@ def test_tapado_first_forms_follow_the_start():
     """V1 as issue 49 decided (DESIGN.md 7): V1 is judged on the lab preset and the linear model (above). At
     Tapado a season grows from finite roughness, and its first forms follow the start: a Gaussian-correlated
     surface crosses its mean every pi lc / sqrt(2) (Rice), so its crests stand pi sqrt(2) lc = 0.67 m apart
-    for lc = 0.15 m, and on days 15-18 (128^2 over 4 m, 3.1 cm cells, seed 1) the forms are still that far
-    apart (0.66-0.68 m measured), well past 2 pi l = 0.38 m: the growth coarsens from the start's spacing
-    instead of selecting 2 pi l below it."""
+    for lc = 0.15 m, and on days 15-18 (128^2 over 4 m, 3.1 cm cells, seed 1) the forms are at least that far
+    apart, well past 2 pi l = 0.38 m: the growth coarsens from the start's spacing instead of selecting 2 pi l
+    below it. Under the constant loss they kept the start's spacing (0.66-0.68 m); under the surface energy
+    balance (DESIGN.md 3.9) only the start's deepest hollows reach still enough air to melt, and the first forms
+    stand 1.09-1.24 m apart."""
     from pathlib import Path
 
     from pipeline.config import load_raw
@@ -172,5 +174,5 @@ def test_tapado_first_forms_follow_the_start():
     assert metrics.crest_spacing(h0, cfg.spacing) == pytest.approx(rice, rel=0.1)
     first = grown.snapshot_days >= 15
     spacings = [metrics.crest_spacing(h, cfg.spacing) for h in grown.snapshots[first]]
-    assert np.mean(spacings) == pytest.approx(rice, rel=0.1), spacings
+    assert np.mean(spacings) > 0.9 * rice, spacings
     assert np.mean(spacings) > 1.5 * ablation.onset_wavelength(cfg.optical_efolding_depth), spacings
