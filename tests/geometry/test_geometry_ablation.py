@@ -177,6 +177,7 @@ def test_thin_north_south_walls_fall_and_east_west_walls_stand():
     cfg = GeometryConfig(
         **{
             **load_raw(SITES / "tapado.yaml")["geometry"],
+            "start_day_of_year": 329,
             "grid_cells": 128,
             "domain_size": 4.0,
             "days": 10,

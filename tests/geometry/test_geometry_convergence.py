@@ -117,10 +117,10 @@ def _flat_season_energy(cfg, sky) -> float:
 def test_flat_ground_sublimates_what_it_absorbs_beyond_the_sky_loss(sky_loss):
     """The model on flat ground (ablation.flat_season_lowering) against the energy balance summed by hand: the
     ground is open to the sky, unshaded and unsheltered, so it sublimates (1 - a) x shortwave - sky_loss per day
-    at L_s. Tapado's preset in the constant-loss mode (no geometry.meteorology) over 10 days (one horizon period a
+    at L_s. Tapado's preset in the constant-loss mode (no geometry.meteorology) over 10 days from 25 Nov (one horizon period a
     day, so the day is the balance's unit)."""
     raw = load_raw(SITES / "tapado.yaml")["geometry"]
-    cfg = GeometryConfig(**{**raw, "meteorology": None, "days": 10, "sky_loss": sky_loss})
+    cfg = GeometryConfig(**{**raw, "meteorology": None, "start_day_of_year": 329, "days": 10, "sky_loss": sky_loss})
     settings = ablation.settings_from_config(cfg)
     assert cfg.horizon_refreshes_per_day == 1
     expected = (

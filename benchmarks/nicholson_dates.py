@@ -1,0 +1,108 @@
+"""The Tapado season on Nicholson et al.'s (2016) survey dates (issue 49; geometry/DESIGN.md 8).
+
+Grows a config's season (the demo's by default) with a snapshot every day and tables, on 25 Nov, 11 Dec,
+20 Dec and 3 Jan, what the surveys measured or show: crest spacing, crest-to-trough height H, crests per m²,
+the share of facets steeper than 45°, the ridge azimuth and its coherence, the mean surface lowering since the
+start, and the stage (pitted, suncups, penitentes; DESIGN.md 7, *Stages*).
+
+Run: .venv/bin/python benchmarks/nicholson_dates.py [--config configs/demo.yaml] [--seeds 1 2] [--set KEY=VALUE ...]
+Writes benchmarks/results/nicholson_dates.md and prints it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from geometry import ablation, metrics, morphology  # noqa: E402
+from pipeline.atomic import write_text_atomic  # noqa: E402
+from pipeline.config import load_config  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+# The survey dates (Nicholson et al. 2016, 2013-14 season) as days of the year.
+SURVEYS = [("25 Nov", 329), ("11 Dec", 345), ("20 Dec", 354), ("3 Jan", 3)]
+
+
+def steep_share(h: np.ndarray, spacing: float, degrees: float = 45.0) -> float:
+    """Share of the cells whose slope (central differences on the periodic grid) exceeds ``degrees``."""
+    gy, gx = np.gradient(np.pad(h, 1, mode="wrap"), spacing)
+    slope = np.degrees(np.arctan(np.hypot(gx, gy)))[1:-1, 1:-1]
+    return float((slope > degrees).mean())
+
+
+def survey_rows(config: str, overrides: list[str], seed: int) -> list[dict]:
+    base = load_config(config, [*overrides, f"seed={seed}"]).geometry
+    offsets = [(day - base.start_day_of_year) % 365 for _, day in SURVEYS]
+    cfg = load_config(
+        config, [*overrides, f"seed={seed}", f"geometry.days={max(offsets)}", f"geometry.snapshots={max(offsets) + 1}"]
+    ).geometry
+    rng = np.random.default_rng(seed)
+    h0 = ablation.initial_height_field_from_config(cfg, rng)
+    grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
+    days = grown.snapshot_days.tolist()
+    radius = metrics.crest_radius(cfg.optical_efolding_depth)
+    rows = []
+    for (label, _), offset in zip(SURVEYS, offsets, strict=True):
+        h = grown.snapshots[days.index(offset)]
+        shape = metrics.morphology(h, cfg.spacing, radius)
+        stage = morphology.stage_metrics(h, cfg.spacing)
+        rows.append(
+            {
+                "date": label,
+                "day": offset,
+                "spacing": shape["crest_spacing_m"],
+                "H": shape["crest_to_trough_m"],
+                "density": shape["crest_density_per_m2"],
+                "steep": steep_share(h, cfg.spacing),
+                "azimuth": shape["ridge_azimuth_deg"],
+                "coherence": shape["coherence"],
+                "lowering": float(h0.mean() - h.mean()),
+                "stage": stage["stage"],
+            }
+        )
+    return rows
+
+
+def table(config: str, overrides: list[str], seeds: list[int]) -> str:
+    runs = [survey_rows(config, overrides, s) for s in seeds]
+    lines = [
+        f"Config {config} {' '.join(overrides)}; seeds {' / '.join(map(str, seeds))}.",
+        "",
+        "| date (season day) | crest spacing [m] | H [m] | crests per m² | facets > 45° | ridge azimuth [°] (coherence)"
+        " | mean lowering [m] | stage |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+
+    def cell(key: str, fmt: str) -> str:
+        return " / ".join(fmt.format(r[i][key]) for r in runs)
+
+    for i, row in enumerate(runs[0]):
+        azimuth = " / ".join(f"{r[i]['azimuth']:.0f} ({r[i]['coherence']:.2f})" for r in runs)
+        lines.append(
+            f"| {row['date']} ({row['day']}) | {cell('spacing', '{:.2f}')} | {cell('H', '{:.2f}')} | "
+            f"{cell('density', '{:.1f}')} | {cell('steep', '{:.0%}')} | {azimuth} | {cell('lowering', '{:.2f}')} | "
+            f"{' / '.join(r[i]['stage'] for r in runs)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--config", default=str(ROOT / "configs" / "demo.yaml"))
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
+    args = parser.parse_args()
+    text = table(args.config, args.overrides, args.seeds)
+    out = ROOT / "benchmarks" / "results" / "nicholson_dates.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out, text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
