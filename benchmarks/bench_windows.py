@@ -1,5 +1,5 @@
 """A film larger than memory: 1920x1080 x 480 gate frames (11.1 GiB of float32) rendered in frame windows
-under render.memory_budget_gib = 8, with its wall time and peak resident memory (README "Posters and videos").
+under render.memory_budget_gib = 8, with its wall time and peak resident memory (docs/guide/assets.md).
 
     python -m pipeline run configs/assets/video_preview.yaml --stage geometry --stage scene
     /usr/bin/time -v python benchmarks/bench_windows.py runs/video_preview/scene /tmp/big_frames.npy

@@ -32,7 +32,7 @@ SET_OPTION = typer.Option(
 )
 
 
-# Exit codes of `pipeline run` (README.md, "The pipeline"): 2 is also typer's for a bad command line.
+# Exit codes of `pipeline run` (docs/guide/configs.md): 2 is also typer's for a bad command line.
 EXIT_FAILED = 1  # a stage failed, or the run could not start (a missing upstream stage, input file)
 EXIT_CONFIG = 2  # the config or the command line is wrong
 EXIT_BUSY = 3  # --no-wait, and another process holds the run folder

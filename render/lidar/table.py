@@ -5,7 +5,7 @@
 
 writes ``biases.csv`` and ``biases.md`` (cm, against the footprint mean, the highest point and the flat
 equivalent) in ``--out``. A sweep of lidar runs (``configs/sweeps/lidar_biases.yaml``) gets its summary from
-``write_sweep_summary``: the full table, the README's compact one and a figure of every point's waveform.
+``write_sweep_summary``: the full table, the compact one (docs/benchmarks/lidar.md) and a figure of every point's waveform.
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def write_table(rows: list[dict], out: Path, stem: str = "biases") -> tuple[Path
 
 def compact_rows(rows: list[dict], channel: str, reference: str = "flat_equivalent") -> list[dict]:
     """One row per run: its inputs and every estimator's bias [cm] in ``channel`` against ``reference`` (the
-    README's table), estimators from the leading edge to the tail."""
+    compact table), estimators from the leading edge to the tail."""
     inputs: dict[str, dict] = {}
     biases: dict[str, dict] = {}
     for row in rows:
