@@ -47,7 +47,6 @@ def block_config(
                 "film": {
                     "mode": "transient",
                     "temporal_bins": bins,
-                    "frame_mode": "bins",
                     "window": "auto",
                     "window_tail_opl": 1.0,
                 },

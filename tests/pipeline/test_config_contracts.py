@@ -49,9 +49,9 @@ def test_the_render_stage_gets_the_root_seed_threads_and_the_scene_depth():
 def test_the_video_title_comes_from_the_config():
     from pipeline.stages import run_title
 
-    assert run_title(load_config(DEMO)) == "Penitentes at 30.1°S, 23 Jan, sun at 10:00 solar time: light in flight"
+    assert run_title(load_config(DEMO)) == "Penitentes at 30.1°S, 19 Dec, sun at 07:30 solar time: light in flight"
     northern = load_config(DEMO, ["geometry.latitude=28.0", "scene.sun.solar_time_h=15.5", "geometry.days=1"])
-    assert run_title(northern) == "Penitentes at 28.0°N, 25 Nov, sun at 15:30 solar time: light in flight"
+    assert run_title(northern) == "Penitentes at 28.0°N, 1 Oct, sun at 15:30 solar time: light in flight"
 
 
 def test_a_reference_film_that_does_not_tile_ours_is_refused():
