@@ -2,7 +2,7 @@
 
 Grows a config's season (the demo's by default) with a snapshot every day and tables, on 25 Nov, 11 Dec,
 20 Dec and 3 Jan, what the surveys measured or show: crest spacing, crest-to-trough height H, crests per m²,
-the share of facets steeper than 45°, the ridge azimuth and its coherence, the mean surface lowering since the
+the share of cells steeper than 45° (morphology.slope_deg), the ridge azimuth and its coherence, the mean surface lowering since the
 start, and the stage (pitted, suncups, penitentes; DESIGN.md 7, *Stages*).
 
 Run: .venv/bin/python benchmarks/nicholson_dates.py [--config configs/demo.yaml] [--seeds 1 2] [--set KEY=VALUE ...]
@@ -28,13 +28,6 @@ ROOT = Path(__file__).resolve().parents[1]
 SURVEYS = [("25 Nov", 329), ("11 Dec", 345), ("20 Dec", 354), ("3 Jan", 3)]
 
 
-def steep_share(h: np.ndarray, spacing: float, degrees: float = 45.0) -> float:
-    """Share of the cells whose slope (central differences on the periodic grid) exceeds ``degrees``."""
-    gy, gx = np.gradient(np.pad(h, 1, mode="wrap"), spacing)
-    slope = np.degrees(np.arctan(np.hypot(gx, gy)))[1:-1, 1:-1]
-    return float((slope > degrees).mean())
-
-
 def survey_rows(config: str, overrides: list[str], seed: int) -> list[dict]:
     base = load_config(config, [*overrides, f"seed={seed}"]).geometry
     offsets = [(day - base.start_day_of_year) % 365 for _, day in SURVEYS]
@@ -58,7 +51,7 @@ def survey_rows(config: str, overrides: list[str], seed: int) -> list[dict]:
                 "spacing": shape["crest_spacing_m"],
                 "H": shape["crest_to_trough_m"],
                 "density": shape["crest_density_per_m2"],
-                "steep": steep_share(h, cfg.spacing),
+                "steep": float((morphology.slope_deg(h, cfg.spacing) > 45.0).mean()),
                 "azimuth": shape["ridge_azimuth_deg"],
                 "coherence": shape["coherence"],
                 "lowering": float(h0.mean() - h.mean()),

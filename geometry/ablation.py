@@ -716,20 +716,18 @@ def energy_warnings(cfg) -> list[str]:
         return []
     if cfg.meteorology is not None:
         met = cfg.meteorology
-        return [
-            f"flat ground loses {1000 * max(0.0, lowering):.2g} mm over the {cfg.days}-day season: under "
-            f"geometry.meteorology (air {met.air_temperature:g} C, vapour {met.vapour_pressure:g} hPa, wind "
-            f"{met.wind_speed:g} m/s) the longwave and turbulent losses take nearly all that a surface of "
-            f"geometry.albedo = {cfg.albedo:g} absorbs at geometry.latitude = {cfg.latitude:g} from day "
-            f"{cfg.start_day_of_year}, so the field will barely grow. Check the site's forcing, the albedo and the "
-            "season (geometry/DESIGN.md 7, Limits)"
-        ]
+        loss = (
+            f"under geometry.meteorology (air {met.air_temperature:g} C, vapour {met.vapour_pressure:g} hPa, wind "
+            f"{met.wind_speed:g} m/s) the longwave and turbulent losses take"
+        )
+        fix = "Check the site's forcing, the albedo and the season"
+    else:
+        loss = f"geometry.sky_loss = {cfg.sky_loss:g} W m-2 takes"
+        fix = "Set geometry.meteorology for the site's air (the surface energy balance), or check the albedo and the season"
     return [
-        f"flat ground loses {1000 * max(0.0, lowering):.2g} mm over the {cfg.days}-day season: geometry.sky_loss = "
-        f"{cfg.sky_loss:g} W m-2 takes nearly all that a surface of geometry.albedo = {cfg.albedo:g} absorbs at "
-        f"geometry.latitude = {cfg.latitude:g} from day {cfg.start_day_of_year}, so the field will barely grow. "
-        "Set geometry.meteorology for the site's air (the surface energy balance), or check the albedo and the "
-        "season (geometry/DESIGN.md 7, Limits)"
+        f"flat ground loses {1000 * max(0.0, lowering):.2g} mm over the {cfg.days}-day season: {loss} nearly all "
+        f"that a surface of geometry.albedo = {cfg.albedo:g} absorbs at geometry.latitude = {cfg.latitude:g} from day "
+        f"{cfg.start_day_of_year}, so the field will barely grow. {fix} (geometry/DESIGN.md 7, Limits)"
     ]
 
 
@@ -769,7 +767,9 @@ def settings_from_config(cfg) -> GrowthSettings:
         max_slope_deg=cfg.max_slope_deg,
         sky_loss=cfg.sky_loss,
         meteorology=meteorology_from_config(cfg.meteorology),
-        still_air_shelter_deg=cfg.meteorology.still_air_shelter_deg if cfg.meteorology else 15.0,
+        still_air_shelter_deg=(
+            cfg.meteorology.still_air_shelter_deg if cfg.meteorology else GrowthSettings.still_air_shelter_deg
+        ),
         cfl=cfg.cfl,
         snapshots=cfg.snapshots,
         slope_order=cfg.slope_order,

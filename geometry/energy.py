@@ -29,6 +29,8 @@ WATER_TO_AIR_MOLAR_MASS = 0.622  # [-]
 LATENT_HEAT_SUBLIMATION = 2.834e6  # L_s [J kg-1]
 LATENT_HEAT_FUSION = 0.334e6  # L_f [J kg-1]
 CLOUD_EMISSIVITY = 0.976  # emissivity of an overcast sky, Konzelmann et al. (1994) [-]
+# Tetens' form of e_i(T) over ice (ECMWF IFS Cy45r1, Part IV): A exp(B (T - T0) / (T - T1)).
+_TETENS_A, _TETENS_B, _TETENS_T0, _TETENS_T1 = 611.21, 22.587, 273.16, -0.7  # [Pa], [-], [K], [K]
 _NEWTON_ITERATIONS = 30
 _NEWTON_TOLERANCE = 1e-4  # [K]
 _COLDEST_SURFACE = 150.0  # [K], a floor that no physical state reaches
@@ -78,7 +80,7 @@ def saturation_vapour_pressure_ice(temperature):
     """e_i(T) over ice [Pa], the Tetens form of the ECMWF IFS (Cy45r1, Part IV): 611.21 exp(22.587 (T - 273.16)
     / (T + 0.7))."""
     temperature = np.asarray(temperature, float)
-    return 611.21 * np.exp(22.587 * (temperature - 273.16) / (temperature + 0.7))
+    return _TETENS_A * np.exp(_TETENS_B * (temperature - _TETENS_T0) / (temperature - _TETENS_T1))
 
 
 def air_density(air_pressure: float, air_temperature: float) -> float:
@@ -110,6 +112,14 @@ class _Coefficients:
         """b = L_s 0.622 / p [J kg-1 Pa-1]."""
         return LATENT_HEAT_SUBLIMATION * WATER_TO_AIR_MOLAR_MASS / self.met.air_pressure
 
+    def latent(self, temperature):
+        """LE = g b (e_a - e_i(T)) [W m-2] at ``temperature`` [K]; negative while the surface sublimates."""
+        return (
+            self.conductance
+            * self.vapour_factor
+            * (self.met.vapour_pressure - saturation_vapour_pressure_ice(temperature))
+        )
+
 
 def _coefficients(shortwave, sky_view, ventilation, met: Meteorology) -> _Coefficients:
     shortwave, sky_view, ventilation = np.broadcast_arrays(
@@ -133,7 +143,7 @@ def _net_flux(temperature, c: _Coefficients, slope: bool = True):
     flux = c.shortwave + longwave + c.conductance * turbulent
     if not slope:
         return flux, None
-    d_saturation = saturation * (22.587 * 273.86) / (temperature + 0.7) ** 2
+    d_saturation = saturation * (_TETENS_B * (_TETENS_T0 - _TETENS_T1)) / (temperature - _TETENS_T1) ** 2
     d_turbulent = -SPECIFIC_HEAT_AIR - c.vapour_factor * d_saturation
     return flux, -4.0 * sigma_eps * c.sky_view * cube + c.conductance * d_turbulent
 
@@ -146,9 +156,7 @@ def net_flux(temperature, shortwave, sky_view, ventilation, met: Meteorology):
 
 def latent_flux(temperature, ventilation, met: Meteorology):
     """LE [W m-2] at surface temperature ``temperature`` [K]; negative while the surface sublimates."""
-    conductance = met.air_density * met.transfer_coefficient * met.wind_speed * np.asarray(ventilation, float)
-    coefficient = conductance * LATENT_HEAT_SUBLIMATION * WATER_TO_AIR_MOLAR_MASS / met.air_pressure
-    return coefficient * (met.vapour_pressure - saturation_vapour_pressure_ice(temperature))
+    return _coefficients(0.0, 1.0, ventilation, met).latent(np.asarray(temperature, float))
 
 
 @dataclass(frozen=True)
@@ -180,5 +188,4 @@ def surface_state(shortwave, sky_view, ventilation, met: Meteorology) -> Surface
         temperature = np.maximum(temperature - step, _COLDEST_SURFACE)
         if float(step.max(initial=0.0)) < _NEWTON_TOLERANCE:
             break
-    latent = c.conductance * c.vapour_factor * (met.vapour_pressure - saturation_vapour_pressure_ice(temperature))
-    return SurfaceState(temperature, np.maximum(at_melting, 0.0), np.maximum(-latent, 0.0))
+    return SurfaceState(temperature, np.maximum(at_melting, 0.0), np.maximum(-c.latent(temperature), 0.0))

@@ -297,10 +297,10 @@ def track(
     centres = np.arange(settings.step, length - 0.5 * settings.length + 1e-9, settings.step)
     results = []
     for centre in centres:
-        start, stop = np.searchsorted(x, (centre - 0.5 * settings.length, centre + 0.5 * settings.length))
-        pulses = int(
-            np.count_nonzero((along >= centre - 0.5 * settings.length) & (along < centre + 0.5 * settings.length))
-        )
+        bounds = (centre - 0.5 * settings.length, centre + 0.5 * settings.length)  # [low, high) along track
+        start, stop = np.searchsorted(x, bounds)
+        first_shot, end_shot = np.searchsorted(along, bounds)
+        pulses = int(end_shot - first_shot)
         results.append(
             fit_segment(
                 x[start:stop],
