@@ -4,7 +4,7 @@ render/core/bindings/convert_ptpb.cpp for the scene's keys and for_each_setting 
 render/core/include/ptpb/settings.hpp for the settings'. Lengths are in metres, times in metres of OPL."""
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -98,6 +98,20 @@ def ptpb_memory_bytes(scene: Mapping[str, Any], settings: Mapping[str, Any], sta
 def ptpb_schedule_gamma(iteration: int, alpha: float) -> float:
     """Kernel-volume factor gamma_i = prod_{k=1..i} (k + alpha) / (k + 1), gamma_0 = 1."""
 
-def render_settings_defaults() -> dict[str, Any]:
-    """Every settings key the core parses, with its default (RenderSettings): enums by name; unset
-    schedule values and zeros that mean none (budgets, checkpoint intervals) as None."""
+class RenderSettingSpec(TypedDict):
+    """One setting as render/core/include/ptpb/settings.hpp declares it."""
+
+    key: str
+    kind: Literal["int", "float", "bool", "enum", "optional"]  # optional: a float or None
+    default: int | float | bool | str | None  # enums by name; unset schedule values, zeros that mean none: None
+    choices: list[str] | None  # an enum's names
+    ge: int | float | None  # bounds of the value, whole numbers as int
+    gt: int | float | None
+    le: int | float | None
+    lt: int | float | None
+    description: str  # ends with its [unit]
+    config: bool  # False: no config sets it; callers of the API do (tests, shards)
+
+def render_settings_spec() -> list[RenderSettingSpec]:
+    """Every setting the core parses, in the order of for_each_setting, with its key, kind, default,
+    choices, bounds, description and whether a config sets it."""

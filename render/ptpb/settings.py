@@ -20,14 +20,6 @@ RESOLVED_KEYS = {
 }
 # Keys of a render section that go into the core's scene dict, not its settings, with where.
 SCENE_KEYS = {"frame_mode": "render.ptpb.api.core_inputs, into the film (scene['film']['frame_mode'])"}
-# Core settings keys that no config sets, with who sets them: overrides of render.ptpb.api.render.
-API_ONLY_KEYS = {
-    "dice_length": "tests and benchmarks (0: the core picks the beam pieces' length)",
-    "jitter": "tests that need pixel-centre rays",
-    "tile_size": "tests of the tiling",
-    "first_iteration": "render.ptpb.split.render_shard",
-    "keep_sums": "render.ptpb.split.render_shard",
-}
 
 
 def scene_bounding_sphere(scene: dict) -> tuple[np.ndarray, float]:

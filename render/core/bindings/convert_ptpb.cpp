@@ -5,6 +5,7 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <cmath>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -51,41 +52,13 @@ Vec3d vec3(const py::dict& d, const char* key, const Vec3d& fallback, const std:
 }
 
 template <typename E>
-using EnumNames = std::vector<std::pair<const char*, E>>;
-
-// How a settings dict spells each enum of RenderSettings.
-const EnumNames<SpatialKernel>& names(SpatialKernel) {
-  static const EnumNames<SpatialKernel> n{{"box", SpatialKernel::Box}, {"epanechnikov", SpatialKernel::Epanechnikov}};
-  return n;
-}
-const EnumNames<TemporalKernel>& names(TemporalKernel) {
-  static const EnumNames<TemporalKernel> n{{"box", TemporalKernel::Box},
-                                           {"epanechnikov", TemporalKernel::Epanechnikov},
-                                           {"quintic", TemporalKernel::Quintic}};
-  return n;
-}
-const EnumNames<BeamKind>& names(BeamKind) {
-  static const EnumNames<BeamKind> n{{"long", BeamKind::Long}, {"short", BeamKind::Short}};
-  return n;
-}
-const EnumNames<MediumEstimator>& names(MediumEstimator) {
-  static const EnumNames<MediumEstimator> n{
-      {"auto", MediumEstimator::Auto}, {"beams", MediumEstimator::Beams}, {"paths", MediumEstimator::Paths}};
-  return n;
-}
-const EnumNames<AccelKind>& names(AccelKind) {
-  static const EnumNames<AccelKind> n{{"grid", AccelKind::Grid}, {"embree", AccelKind::Embree}};
-  return n;
-}
-
-template <typename E>
 std::string name_of(E value) {
-  for (const auto& [name, e] : names(value))
+  for (const auto& [name, e] : choices(value))
     if (e == value) return name;
-  throw std::logic_error("an enum value without a name in convert_ptpb.cpp");
+  throw std::logic_error("an enum value without a name in choices() (ptpb/settings.hpp)");
 }
 
-// The enum that ``value`` names among ``options`` (a braced list of name, enum pairs, or names(E{})).
+// The enum that ``value`` names among ``options`` (a braced list of name, enum pairs, or choices(E{})).
 template <typename E, typename Options = std::initializer_list<std::pair<const char*, E>>>
 E choose(const std::string& value, const Options& options, const std::string& key) {
   std::string names;
@@ -306,10 +279,10 @@ RenderSettings parse_settings(const py::dict& d) {
   // Every length of the schedule follows from R_0, and no default of it would suit a caller's scene.
   if (!d.contains("initial_beam_radius")) throw std::invalid_argument(w + ".initial_beam_radius is required");
   RenderSettings s;
-  for_each_setting(s, [&](const char* key, auto& value, auto... zero_means_none) {
+  for_each_setting(s, [&](const char* key, auto& value, const SettingInfo& info) {
     using T = std::decay_t<decltype(value)>;
-    if constexpr (sizeof...(zero_means_none) > 0) {
-      if (d.contains(key) && d[key].is_none()) {
+    if constexpr (std::is_arithmetic_v<T>) {
+      if (info.zero_means_none && d.contains(key) && d[key].is_none()) {
         value = T{0};
         return;
       }
@@ -318,7 +291,7 @@ RenderSettings parse_settings(const py::dict& d) {
       // The schedule's defaults belong to the core (resolve_schedule): None leaves them unset.
       if (d.contains(key)) value = optional_number(d, key, w);
     } else if constexpr (std::is_enum_v<T>) {
-      value = choose<T>(get<std::string>(d, key, name_of(value), w), names(T{}), key);
+      value = choose<T>(get<std::string>(d, key, name_of(value), w), choices(T{}), key);
     } else {
       value = get<T>(d, key, value, w);
     }
@@ -326,18 +299,58 @@ RenderSettings parse_settings(const py::dict& d) {
   return s;
 }
 
-py::dict settings_defaults_dict() {
+namespace {
+
+// A bound as Python writes it: a whole number as an int (the schema's messages then read "greater than 0").
+py::object bound(const std::optional<double>& b) {
+  if (!b) return py::none();
+  if (std::floor(*b) == *b) return py::int_(static_cast<long long>(*b));
+  return py::float_(*b);
+}
+
+// What a setting's value is, in the schema's words: int, float, bool, enum, or optional (a float or None).
+template <typename T>
+const char* kind_of(const SettingInfo& info) {
+  if constexpr (IsOptional<T>::value) {
+    return "optional";
+  } else if constexpr (std::is_same_v<T, bool>) {
+    return "bool";
+  } else if constexpr (std::is_enum_v<T>) {
+    return "enum";
+  } else if constexpr (std::is_integral_v<T>) {
+    return "int";
+  } else {
+    return info.zero_means_none ? "optional" : "float";
+  }
+}
+
+}  // namespace
+
+py::list settings_spec_list() {
   const RenderSettings s;
-  py::dict out;
-  for_each_setting(s, [&](const char* key, const auto& value, auto... zero_means_none) {
+  py::list out;
+  for_each_setting(s, [&](const char* key, const auto& value, const SettingInfo& info) {
     using T = std::decay_t<decltype(value)>;
-    if constexpr (sizeof...(zero_means_none) > 0) {
-      out[key] = value == T{0} ? py::none() : py::cast(value);
-    } else if constexpr (std::is_enum_v<T>) {
-      out[key] = name_of(value);
+    py::dict spec;
+    spec["key"] = key;
+    spec["kind"] = kind_of<T>(info);
+    py::list names;
+    if constexpr (std::is_enum_v<T>) {
+      spec["default"] = name_of(value);
+      for (const auto& [name, e] : choices(value)) names.append(name);
+    } else if constexpr (std::is_arithmetic_v<T>) {
+      spec["default"] = info.zero_means_none && value == T{0} ? py::none() : py::cast(value);
     } else {
-      out[key] = py::cast(value);  // an unset optional is None
+      spec["default"] = py::cast(value);  // an unset optional is None
     }
+    spec["choices"] = names.empty() ? py::object(py::none()) : py::object(names);
+    spec["ge"] = bound(info.ge);
+    spec["gt"] = bound(info.gt);
+    spec["le"] = bound(info.le);
+    spec["lt"] = bound(info.lt);
+    spec["description"] = info.description;
+    spec["config"] = !info.api_only;
+    out.append(spec);
   });
   return out;
 }

@@ -17,8 +17,10 @@ namespace py = pybind11;
 ptpb::Scene parse_scene(const py::dict& d);
 // The settings by the keys of ptpb::for_each_setting; a key left out keeps its default.
 ptpb::RenderSettings parse_settings(const py::dict& d);
-// Those keys with RenderSettings' defaults: enums by name, unset optionals and ZeroMeansNone's zeros as None.
-py::dict settings_defaults_dict();
+// The settings as for_each_setting declares them, one dict each in its order: key; kind (int, float, bool, enum,
+// or optional: a float or None); default (enums by name; unset optionals and zeros that mean none as None);
+// choices (an enum's names, else None); ge, gt, le, lt (bounds or None); description; config (false: API only).
+py::list settings_spec_list();
 
 // The counters and timings a result's "stats" dict and a checkpoint state carry.
 py::dict stats_dict(const ptpb::RenderStats& s);

@@ -137,10 +137,10 @@ void register_ptpb(py::module_& m) {
   m.def("ptpb_memory_bytes", &memory_bytes_py, py::arg("scene"), py::arg("settings"), py::arg("state_copy") = false,
         "Peak bytes of the render's image buffers, as checked against settings.memory_budget_gib.");
   m.def("ptpb_schedule_gamma", &schedule_gamma, py::arg("iteration"), py::arg("alpha"));
-  m.def(
-      "render_settings_defaults", &settings_defaults_dict,
-      "Every settings key the core parses, with its default (RenderSettings, render/core/include/ptpb/settings.hpp):\n"
-      "enums by name; unset schedule values and zeros that mean none (budgets, checkpoint intervals) as None.");
+  m.def("render_settings_spec", &settings_spec_list,
+        "Every setting the core parses, as render/core/include/ptpb/settings.hpp declares it: a list of dicts with\n"
+        "key, kind (int, float, bool, enum, optional), default (enums by name; unset schedule values and zeros\n"
+        "that mean none as None), choices, bounds ge/gt/le/lt, description and config (false: set by the API only).");
   m.attr("SPEED_OF_LIGHT") = kSpeedOfLight;
   m.attr("PS_PER_M_OPL") = kPicosecondsPerMetreOpl;
 }
