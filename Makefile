@@ -24,11 +24,11 @@ APT_PACKAGES := build-essential git python3 python3-venv python3-dev libembree-d
 	libosmesa6 libegl1 libgl1 libglx-mesa0 libxrender1 chromium clang-format
 
 CORE_SOURCES := $(shell find render/core -name '*.cpp' -o -name '*.hpp' -o -name 'CMakeLists.txt') CMakeLists.txt
-PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find pipeline geometry render -name '__init__.py')
+PACKAGE_MARKERS := pyproject.toml $(CORE_SOURCES) $(shell find common pipeline geometry render -name '__init__.py')
 
 CORE_FORMATTED := $(shell find render/core -name '*.cpp' -o -name '*.hpp')
 
-.PHONY: help setup demo poster video lint docs test test-all test-cpp test-py cluster-test bench convergence sweep sanitize clean distclean
+.PHONY: help setup demo poster video lint docs test test-all test-cpp test-py cluster-test bench convergence sweep sanitize clean distclean validation-results
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  make %-10s %s\n", $$1, $$2}'
@@ -69,20 +69,34 @@ test: setup ## Lint, the docs site (strict), then the C++ tests (ctest) and the 
 	$(MAKE) lint
 	$(MAKE) docs
 	$(MAKE) test-cpp
-	$(PY) -m pytest -m "not slow" -n $(TEST_JOBS) --dist loadfile $(PYTEST_ARGS)
+	$(PY) -m pytest -m "not slow" -n $(TEST_JOBS) --dist loadfile --validation-report build/validation.md $(PYTEST_ARGS)
 
 test-all: setup ## Run every test, the slow ones included
 	$(MAKE) test-cpp
-	$(PY) -m pytest $(PYTEST_ARGS)
+	$(PY) -m pytest --validation-report build/validation.md $(PYTEST_ARGS)
 
-# A one-node SLURM cluster with accounting on localhost (as root): tests/cluster/slurm_cluster.sh installs
+# make test and make test-all write the figures the tests record (tests/validation_report.py) to build/validation.md;
+# this copies them to benchmarks/results/validation.md, which the docs' Validation page includes and git keeps. It
+# refuses a table older than the last commit to tests/, which would describe tests that have changed since.
+validation-results: ## Copy the last test run's validation table into benchmarks/results/ (docs/validation.md)
+	@test -f build/validation.md || { echo "error: build/validation.md is missing: run make test (or make test-all) first" >&2; exit 1; }
+	@made=$$(stat -c %Y build/validation.md); changed=$$(git log -1 --format=%ct -- tests); \
+	if [ -n "$$changed" ] && [ "$$made" -lt "$$changed" ]; then \
+	  echo "error: build/validation.md was written $$(date -u -d @$$made '+%F %H:%M UTC'), before the last commit to tests/" \
+	    "($$(git log -1 --format=%h -- tests), $$(date -u -d @$$changed '+%F %H:%M UTC')): run make test again first" >&2; \
+	  exit 1; \
+	fi
+	cp build/validation.md benchmarks/results/validation.md
+	@echo "benchmarks/results/validation.md: $$(grep -c '^| .* | \(passed\|failed\) | ' benchmarks/results/validation.md) figures"
+
+# A one-node SLURM cluster with accounting on localhost (as root): tests/pipeline/cluster/slurm_cluster.sh installs
 # slurm-wlm, slurmdbd, munge and MariaDB, starts them, and on exit (pass or fail) stops them and purges what
 # it installed, so nothing runs or starts at boot afterwards. KEEP_PACKAGES=1 keeps the packages (disabled).
-CLUSTER := tests/cluster/slurm_cluster.sh
+CLUSTER := tests/pipeline/cluster/slurm_cluster.sh
 
 cluster-test: setup ## Sweeps, shards and faults through a real one-node SLURM cluster (as root, under 10 min; KEEP_PACKAGES=1)
 	trap '$(CLUSTER) $(if $(KEEP_PACKAGES),down,purge)' EXIT; \
-	  $(CLUSTER) install && $(CLUSTER) up && $(PY) -m pytest tests/cluster -m cluster -v -rP $(PYTEST_ARGS)
+	  $(CLUSTER) install && $(CLUSTER) up && $(PY) -m pytest tests/pipeline/cluster -m cluster -v -rP $(PYTEST_ARGS)
 
 test-cpp: $(STAMPS)/venv
 	cmake -S render/core -B build/ctest -G Ninja -DCMAKE_BUILD_TYPE=Release -DPTPB_BUILD_TESTS=ON > build-ctest.log 2>&1 || (cat build-ctest.log; exit 1)
@@ -93,8 +107,8 @@ test-cpp: $(STAMPS)/venv
 # ASan + UBSan build of the core in build/sanitize: the C++ tests (which render small scenes, with
 # checkpoints and resume) run as they are; the Python bindings' tests load the sanitized _core with
 # the ASan runtime and libstdc++ preloaded (Python is not instrumented), leak checks off for CPython.
-SANITIZE_TESTS := tests/ptpb/test_ptpb_hostile.py tests/ptpb/test_ptpb_checkpoint.py tests/ptpb/test_ptpb_stage.py \
-	tests/core/test_raytrace.py
+SANITIZE_TESTS := tests/render/ptpb/test_ptpb_hostile.py tests/render/ptpb/test_ptpb_checkpoint.py tests/render/ptpb/test_ptpb_stage.py \
+	tests/render/engine/test_raytrace.py
 
 sanitize: $(STAMPS)/venv ## Build the core with -fsanitize=address,undefined; run ctest and the bindings' tests under it
 	cmake -S render/core -B build/sanitize -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPTPB_SANITIZE=ON \

@@ -24,6 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from common.units import NS_PER_M_OPL  # noqa: E402
 from pipeline.schema.scene import (  # noqa: E402
     CameraConfig,
     FilmConfig,
@@ -33,7 +34,6 @@ from pipeline.schema.scene import (  # noqa: E402
     SkyConfig,
     SunConfig,
 )
-from pipeline.units import NS_PER_M_OPL  # noqa: E402
 from render.ptpb import load_scene, render  # noqa: E402
 from render.scene.stage import run_scene_stage  # noqa: E402
 

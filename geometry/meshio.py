@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.atomic import atomic_path
+from common.atomic import atomic_path
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl")
 

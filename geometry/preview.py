@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from common.atomic import atomic_path
 from geometry import irradiance, metrics, morphology
 from geometry.mesh import TriangleMesh
-from pipeline.atomic import atomic_path
 
 
 def hillshade(

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common.atomic import atomic_path, write_json_atomic
 from geometry import ablation, irradiance, mesh, metrics, morphology, preview, sunpath
-from pipeline.atomic import atomic_path, write_json_atomic
 from pipeline.schema.geometry import GeometryConfig
 
 log = logging.getLogger(__name__)

@@ -12,9 +12,9 @@ from typing import NoReturn
 import typer
 import yaml
 
+from common.log import setup_logging
 from pipeline.config import ConfigError, load_config
 from pipeline.lock import RunFolderBusy, hold_run_folder
-from pipeline.log import setup_logging
 from pipeline.runner import StageError, StageFailed, run_dir, run_stages
 from pipeline.space import NotEnoughSpace
 

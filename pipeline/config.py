@@ -25,7 +25,7 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from pipeline.paths import CONFIGS_DIR
+from common.paths import CONFIGS_DIR
 
 
 class ConfigError(ValueError):

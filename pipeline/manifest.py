@@ -14,7 +14,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from pipeline.paths import PROJECT_ROOT
+from common.paths import PROJECT_ROOT
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_VERSION = 1

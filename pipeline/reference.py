@@ -21,7 +21,7 @@ from pydantic import BaseModel
 from pydantic.fields import FieldInfo
 from pydantic_core import PydanticUndefined
 
-from pipeline.paths import PROJECT_ROOT
+from common.paths import PROJECT_ROOT
 
 REFERENCE_PATH = PROJECT_ROOT / "docs" / "config-reference.md"
 UNIT = re.compile(r"\s*\[([^\[\]]+)\]")
@@ -172,7 +172,7 @@ def explain(key: str) -> str:
 
 
 def write(path: Path = REFERENCE_PATH) -> Path:
-    from pipeline.atomic import write_text_atomic
+    from common.atomic import write_text_atomic
 
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_text_atomic(path, markdown())

@@ -29,10 +29,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pipeline.atomic import final_path, write_json_atomic
+from common.atomic import final_path, write_json_atomic
+from common.log import FILE_ONLY, log_to_file
 from pipeline.config import config_hash
 from pipeline.lock import hold_run_folder
-from pipeline.log import FILE_ONLY, log_to_file
 from pipeline.manifest import (
     MANIFEST_NAME,
     MANIFEST_VERSION,

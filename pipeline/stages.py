@@ -111,7 +111,7 @@ def composite_stage(ctx: StageContext) -> dict:
         cfg = cfg.model_copy(update={"title": run_title(ctx.config)})
     guides = None
     if cfg.denoise:
-        from render.scene.guides import guide_buffers
+        from render.output.guides import guide_buffers
 
         guides = guide_buffers(ctx.inputs["scene"])
     return run_composite_stage(

@@ -25,8 +25,10 @@ stage runner's manifests skip the stages whose inputs did not change.
 instead of against its own (equal-time comparisons). In the error-against-time plot a point that
 renders its own reference then stands for the reference renderer, any other point for ours.
 
-``python -m render.output.summary runs/sweeps/<sweep>/workflow.yaml`` writes the sweep summary
-the table (CSV, Markdown, HTML), the poster grid, the error-against-time plot and ``report.html``.
+``python -m pipeline.sweep runs/sweeps/<sweep>/workflow.yaml`` (the workflow's summary rule) writes the sweep
+summary: the table (CSV, Markdown, HTML), the poster grid, the error-against-time plot and ``report.html``
+(render/output/summary.py), or for a sweep whose points end in the lidar stage the table of range biases
+(render/lidar/table.py).
 """
 
 from __future__ import annotations
@@ -46,7 +48,8 @@ from typing import Any
 import yaml
 from pydantic import Field, ValidationError, field_validator
 
-from pipeline.atomic import write_text_atomic
+from common.atomic import write_text_atomic
+from common.paths import CONFIGS_DIR, PROJECT_ROOT
 from pipeline.config import (
     ConfigError,
     apply_overrides,
@@ -56,7 +59,6 @@ from pipeline.config import (
     parse_override,
     subtree,
 )
-from pipeline.paths import CONFIGS_DIR, PROJECT_ROOT
 from pipeline.schema import Config
 from pipeline.schema.base import StrictModel
 
@@ -527,3 +529,34 @@ def points_not_done(sweep: Sweep) -> list[str]:
 
     stage = target_stage(sweep)
     return [p.name for p in sweep.points if not (run_dir(p.config) / stage / "manifest.json").is_file()]
+
+
+def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
+    """The sweep summary that fits the sweep's last stage, from its workflow config (``prepare``): the lidar
+    table of range biases for laser shots, else the images' table, poster and error plot."""
+    spec = yaml.safe_load(Path(workflow_yaml).read_text(encoding="utf-8"))
+    if spec.get("target_stage") == "lidar":
+        from render.lidar.table import write_sweep_summary
+
+        return write_sweep_summary(spec)
+    from render.output.summary import write_summary as write_image_summary
+
+    return write_image_summary(workflow_yaml)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pipeline.sweep WORKFLOW_YAML``: the summary rule of the sweep workflow."""
+    from common.log import setup_logging
+
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1:
+        print("usage: python -m pipeline.sweep runs/sweeps/<sweep>/workflow.yaml", file=sys.stderr)
+        return 2
+    setup_logging(quiet=False)
+    paths = write_summary(argv[0])
+    print(f"sweep summary: {paths['report']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -6,8 +6,8 @@ from typing import Literal
 
 from pydantic import Field
 
+from common.units import SPEED_OF_LIGHT
 from pipeline.schema.base import StrictModel
-from pipeline.units import SPEED_OF_LIGHT
 
 
 class CompositeConfig(StrictModel):
@@ -65,16 +65,15 @@ class CompositeConfig(StrictModel):
     )
     denoise_quality: Literal["high", "balanced", "fast"] = Field(
         "high",
-        description="Open Image Denoise's quality when denoise is on: on 2 cores a 1920 x 1080 frame takes about "
-        "4.6 s at high and 1.3 s at balanced [-].",
+        description="Open Image Denoise's quality when denoise is on: high is the cleanest and takes several "
+        "times as long as balanced; fast is for drafts [-].",
     )
     denoise_refine: bool = Field(
         True,
         description="When denoising, run Open Image Denoise twice on each frame: the second pass (at balanced) "
         "takes the first pass's frame as its albedo guide, since in snow the first hit's albedo is one colour "
-        "everywhere and tells the network nothing about where the light lies. On the demo's frames 0.091 and 0.086 "
-        "of the raw error instead of 0.108 and 0.103 (two seeds); it costs a balanced pass a frame, about 1.3 s at "
-        "1920 x 1080 on 2 cores. Leave it off where the albedo guide carries the detail (textured surfaces) "
+        "everywhere and tells the network nothing about where the light lies. It lowers the error against the "
+        "truth and costs one balanced pass a frame (benchmarks/crop_quality.py measures both). Leave it off where the albedo guide carries the detail (textured surfaces) "
         "(render/output/LOOK.md, *The refining pass*) [-].",
     )
     denoise_arrival_band: Literal["auto", "on", "off"] = Field(

@@ -63,7 +63,7 @@ class LidarConfig(StrictModel):
         lt=1,
         description="Roulette survival cap per collision of the shot's camera paths [-]. A path that scatters N times "
         "gains weight as e^(N (1 - cap)); in fine-grained snow late paths scatter thousands of times, so 0.9999 "
-        "removes their fireflies at some 2.3x the time (render/lidar/LIDAR.md §8).",
+        "removes their fireflies at over twice the time (render/lidar/LIDAR.md §8).",
     )
 
     @model_validator(mode="after")

@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 
 from pydantic import BeforeValidator, Field, NonNegativeFloat, field_validator, model_validator
 
-from pipeline.paths import optics_preset_names
+from common.paths import optics_preset_names
 from pipeline.schema.base import StrictModel
 
 

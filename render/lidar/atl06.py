@@ -28,7 +28,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from pipeline.units import SPEED_OF_LIGHT
+from common.units import SPEED_OF_LIGHT
 from render.lidar.photons import Beam, LinkBudget, PhotonEvents, draw_shots
 from render.lidar.waveform import pulse_sigma_opl
 

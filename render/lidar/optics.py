@@ -16,7 +16,7 @@ interpolated linearly in ln k against λ:
 
 The project's ``derive_snow`` (render/scene/optics.py, OPTICS.md §3) gives the same medium per RGB channel with
 the Kokhanovsky–Zege form of 1 − ω; at one wavelength the two agree to first order in c = 2γ r_opt
-(tests/lidar/test_lidar_optics.py states the tolerance).
+(tests/render/lidar/test_lidar_optics.py states the tolerance).
 """
 
 from __future__ import annotations

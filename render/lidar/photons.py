@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.units import SPEED_OF_LIGHT
+from common.units import SPEED_OF_LIGHT
 from render.lidar.waveform import pulse_sigma_opl
 
 PLANCK = 6.62607015e-34  # J s, exact (SI 2019)

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import atomic_path, write_json_atomic
-from pipeline.memory import PeakMemory
+from common.atomic import atomic_path, write_json_atomic
+from common.memory import PeakMemory
 from render.lidar.optics import SnowOptics, snow_optics
 from render.lidar.scene import Receiver, bins_for, medium, receiver_weights, shot_scene
 from render.lidar.waveform import (

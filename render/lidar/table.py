@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.atomic import atomic_path, write_text_atomic
+from common.atomic import atomic_path, write_text_atomic
 
 COLUMNS = ("run", "target", "density", "grain_mm", "footprint_m", "channel", "estimator")
 # The estimators from the leading edge to the tail: the compact table's columns (compact_rows).

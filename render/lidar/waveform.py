@@ -26,7 +26,7 @@ from scipy.ndimage import convolve1d
 from scipy.optimize import curve_fit
 from scipy.special import ndtr
 
-from pipeline.units import NS_PER_M_OPL
+from common.units import NS_PER_M_OPL
 
 SIGMA_PER_FWHM = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 KERNEL_HALF_WIDTH_SIGMAS = 8.0  # the pulse's tail beyond 8 sigma carries 1e-15 of its energy

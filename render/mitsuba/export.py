@@ -174,7 +174,7 @@ def plan_tiles(scene: Scene, scene_dir: Path, tiles: int) -> list[Tile]:
     """The film cut into square tiles, ``tiles`` of them along its longer side. Each tile's origin is the
     centre of the box around the points that its pixel centres see (the point that makes max|p| smallest
     there); a tile that sees nothing within the bounding sphere keeps the sphere's centre."""
-    from render.ptpb.raytrace import RayEngine
+    from render.engine import RayEngine
 
     if tiles < 1:
         raise ValueError(f"tiles must be at least 1, got {tiles}")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.memory import PeakMemory
+from common.memory import PeakMemory
 from render.mitsuba.export import Tile, disk_sun_opl_shift, pass_seed, plan_tiles, scene_to_mitsuba, use_variant
 from render.scene.model import Scene
 
@@ -34,7 +34,7 @@ def _render_passes(
 
     variant = use_variant(variant, transient=transient)
     plan: list[Tile | None] = list(plan_tiles(scene, scene_dir, tiles)) if tiles else [None]
-    with PeakMemory() as memory:  # the reference renderer's own peak (pipeline/memory.py)
+    with PeakMemory() as memory:  # the reference renderer's own peak (common/memory.py)
         # One tile keeps its scene loaded; several are loaded in turn, so that only one is in memory.
         loaded = (
             mi.load_dict(scene_to_mitsuba(scene, scene_dir, transient=transient, spp=spp_per_pass))

@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 from typing import Any, TypedDict
 
-from pipeline.atomic import save_npy_atomic, write_json_atomic
+from common.atomic import save_npy_atomic, write_json_atomic
 from pipeline.schema.scene import ReferenceConfig
 from render.mitsuba.export import TRANSIENT_SEED_OFFSET, check_reference_limits
 from render.mitsuba.passes import render_steady, render_transient

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import write_text_atomic
+from common.atomic import write_text_atomic
 from render.output.agreement import agreement
 from render.output.figures import error_curves
 from render.output.files import RenderOutputs
@@ -266,7 +266,7 @@ def report_lead(rows: list[dict[str, Any]], stages: dict[str, dict[str, Any]] | 
     lines = key_results(rows)
     if stages:
         lines.append(
-            "Stage peak memory (resident, pipeline/memory.py): "
+            "Stage peak memory (resident, common/memory.py): "
             + "; ".join(
                 f"{name} {record['peak_memory_mib']:.0f} MiB ({record['peak_memory_added_mib']:.0f} MiB above its start)"
                 for name, record in stages.items()
@@ -291,7 +291,7 @@ def report_lead(rows: list[dict[str, Any]], stages: dict[str, dict[str, Any]] | 
     caption = (
         "Mean radiance in W m⁻² sr⁻¹ (frames: per bin, summed over the frames' mean); relMSE = mean of "
         "(x − r)² / (r² + 0.01) against Mitsuba volpath (steady) or mitransient (frames); peak memory is the "
-        "resident size of the process while that renderer ran (pipeline/memory.py), Python and libraries included."
+        "resident size of the process while that renderer ran (common/memory.py), Python and libraries included."
     )
     return (
         f"<h2>Results</h2><ul>{items}</ul><table><caption>{html.escape(caption)}</caption><tr>{head}</tr>{body}</table>"
@@ -302,10 +302,10 @@ def run_compare_stage(
     run_root: Path, ours_dir: Path | None, reference_dir: Path | None, out_dir: Path, stage_names, title: str
 ) -> dict:
     """The `compare` stage: the table, the error plot and ``report.html`` linking every stage's files."""
-    from pipeline.memory import PeakMemory
+    from common.memory import PeakMemory
     from render.output.report import write_report
 
-    with PeakMemory() as memory:  # the stage's own peak (pipeline/memory.py), reported beside the composite's
+    with PeakMemory() as memory:  # the stage's own peak (common/memory.py), reported beside the composite's
         result = compare_renders(ours_dir, reference_dir, out_dir)
     write_report(
         out_dir / "report.html",

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from pipeline.atomic import atomic_path
-from pipeline.memory import PeakMemory
+from common.atomic import atomic_path
+from common.memory import PeakMemory
 from render.output.denoise import Guides
 from render.output.figures import ArrivalTimes, relative_difference, side_by_side_still, streak_image
 from render.output.files import FrameAxis, RenderOutputs, frame_windows
@@ -504,8 +504,8 @@ def run_composite_stage(
     Reads ``render_dir/frames.npy`` (memory-mapped, a window at a time) and ``stats.json`` (the film),
     ``reference_dir/frames.npy`` when a transient reference exists, and the camera from
     ``scene_dir/scene.json`` for the scale bar. With ``cfg.denoise`` the videos show denoised frames, guided by
-    ``guides`` (render.output.denoise.Guides, which render.scene.guides traces). The summary carries the
-    exposures and the stage's own peak memory (pipeline/memory.py).
+    ``guides`` (render.output.denoise.Guides, which render.output.guides traces). The summary carries the
+    exposures and the stage's own peak memory (common/memory.py).
     """
     with PeakMemory() as memory:
         summary = _composite(render_dir, reference_dir, scene_dir, cfg, out_dir, guides)
@@ -546,7 +546,7 @@ def _composite(
     shown, denoised, delivered = frames, None, "raw"
     if cfg.denoise:
         if guides is None:
-            raise ValueError("composite.denoise needs the scene's guide buffers (render.scene.guides.guide_buffers)")
+            raise ValueError("composite.denoise needs the scene's guide buffers (render.output.guides.guide_buffers)")
         shown, denoised, delivered = *_denoise(frames, film, cfg, guides, out_dir, exr_attributes), "denoised"
         if steady is not None:
             steady = _denoise_still(steady, cfg, guides, out_dir, denoised)

@@ -1,6 +1,6 @@
 """Denoised delivery frames (render/output/LOOK.md, *Denoised delivery*): Intel Open Image Denoise (``pyoidn``, CPU) on each
 transient frame, guided by the albedo and normal of the first camera hit (``Guides``, which
-render.scene.guides traces from the scene's own triangles: noise-free and the same for every frame).
+render.output.guides traces from the scene's own triangles: noise-free and the same for every frame).
 
 Denoised frames are for people to look at. Comparisons, guards, tables and the sweep summary read the raw
 frames; nothing here writes over them.
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter, zoom
 
-from pipeline.atomic import atomic_path
+from common.atomic import atomic_path
 from render.output.files import frame_windows
 
 
@@ -25,7 +25,7 @@ from render.output.files import frame_windows
 class Guides:
     """First-hit albedo [0, 1] and world-space unit normal (facing the camera) per pixel, (H, W, 3) float32; for a
     transient film, ``arrival_bins`` (lights, 2, H, W) int32: the first and last frame that each light's direct
-    arrival reaches within each pixel (-1: none; render.scene.guides.arrival_bins), which denoise_film keeps
+    arrival reaches within each pixel (-1: none; render.output.guides.arrival_bins), which denoise_film keeps
     apart from the rest of each frame (render/output/LOOK.md, *The arrival band*)."""
 
     albedo: np.ndarray

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import OpenImageIO as oiio
 
-from pipeline.atomic import atomic_path
+from common.atomic import atomic_path
 from render.output.files import frame_windows
 
 

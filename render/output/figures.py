@@ -15,8 +15,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from pipeline.atomic import atomic_path  # noqa: E402
-from pipeline.units import PS_PER_M_OPL  # noqa: E402
+from common.atomic import atomic_path  # noqa: E402
+from common.units import PS_PER_M_OPL  # noqa: E402
 from render.output.tonemap import ToneCurve, luminance, to_display  # noqa: E402
 
 
@@ -174,16 +174,6 @@ def rendered_image(
     return _save(fig, path)
 
 
-def arrival_map(first_arrival_opl: np.ndarray, path: Path, title: str) -> list[Path]:
-    """Per-pixel OPL of the earliest direct light (NaN where the camera sees no lit surface), in ps."""
-    fig, ax = plt.subplots(figsize=(6.5, 6.5 * first_arrival_opl.shape[0] / first_arrival_opl.shape[1] + 0.5))
-    shown = ax.imshow(first_arrival_opl * PS_PER_M_OPL, cmap="viridis", interpolation="nearest")
-    fig.colorbar(shown, ax=ax, label="first direct arrival (ps)", shrink=0.8)
-    ax.set_title(title, fontsize=10)
-    ax.axis("off")
-    return _save(fig, path)
-
-
 class ArrivalTimes:
     """Per pixel, the time since first light at which its luminance, summed over the frames, first reaches
     ``fraction`` of its total ``total_luminance`` (H, W), in ns; NaN where no light arrives. Fed a frame's
@@ -197,7 +187,7 @@ class ArrivalTimes:
         self.running = np.zeros(self.total.shape)
 
     def add(self, k: int, frame_luminance: np.ndarray) -> None:
-        from pipeline.units import NS_PER_M_OPL
+        from common.units import NS_PER_M_OPL
 
         self.running += frame_luminance
         reached = np.isnan(self.arrival) & (self.total > 0) & (self.running >= self.fraction * self.total)

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import save_npy_atomic, write_json_atomic
-from pipeline.units import NS_PER_M_OPL
+from common.atomic import save_npy_atomic, write_json_atomic
+from common.units import NS_PER_M_OPL
 
 OURS_STATS = "stats.json"
 REFERENCE_TIMING = "timing.json"

@@ -13,7 +13,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from pipeline.atomic import write_text_atomic
+from common.atomic import write_text_atomic
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".svg"}
 VIDEO_SUFFIXES = {".mp4", ".webm"}

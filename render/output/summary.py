@@ -2,8 +2,9 @@
 renders, the error-against-time plot and ``report.html``, read from the points' stage outputs.
 
 It reads only files: ``workflow.yaml`` (written by ``python -m pipeline sweep``, which resolves each
-point's overrides, inputs and enabled stages) and the stage folders of every point's run.
-``python -m render.output.summary runs/sweeps/<sweep>/workflow.yaml`` is the workflow's summary rule.
+point's overrides, inputs and enabled stages) and the stage folders of every point's run. The workflow's
+summary rule (``python -m pipeline.sweep``) calls it for every sweep but a lidar one, whose table of range
+biases render/lidar/table.py writes.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import io
 import json
 import logging
 import os
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pipeline.atomic import write_text_atomic
+from common.atomic import write_text_atomic
 from render.output.compare import likely_dark
 from render.output.figures import error_curves, poster_grid
 from render.output.files import RenderOutputs
@@ -227,7 +227,7 @@ def write_poster(points: list[tuple[str, Any, str]], path: Path, title: str) -> 
         log.warning("sweep summary: no steady render found; the poster is a placeholder")
         import matplotlib.pyplot as plt
 
-        from pipeline.atomic import atomic_path
+        from common.atomic import atomic_path
 
         fig = plt.figure(figsize=(4, 1))
         fig.text(0.5, 0.5, "no steady render found", ha="center", va="center")
@@ -349,10 +349,6 @@ def _report(spec: dict, rows: list[dict], table_md: Path, folder: Path, has_erro
 def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
     """The sweep summary from the points' stage outputs; missing files give empty cells and warnings."""
     spec = yaml.safe_load(Path(workflow_yaml).read_text(encoding="utf-8"))
-    if spec.get("target_stage") == "lidar":  # laser shots: a table of range biases, not images
-        from render.lidar.table import write_sweep_summary
-
-        return write_sweep_summary(spec)
     folder = Path(spec["folder"])
     truth = None
     if spec.get("ground_truth"):
@@ -390,21 +386,3 @@ def write_summary(workflow_yaml: str | Path) -> dict[str, Path]:
             stale.unlink(missing_ok=True)
     paths["report"] = write_text_atomic(folder / "report.html", _report(spec, rows, paths["md"], folder, bool(series)))
     return paths
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m render.output.summary WORKFLOW_YAML``: the summary rule of the sweep workflow."""
-    from pipeline.log import setup_logging
-
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 1:
-        print("usage: python -m render.output.summary runs/sweeps/<sweep>/workflow.yaml", file=sys.stderr)
-        return 2
-    setup_logging(quiet=False)
-    paths = write_summary(argv[0])
-    print(f"sweep summary: {paths['report']}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

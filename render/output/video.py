@@ -15,8 +15,8 @@ import numpy as np
 from av.video.reformatter import ColorRange, Colorspace
 from PIL import Image, ImageDraw, ImageFont
 
-from pipeline.atomic import atomic_path
-from pipeline.units import PS_PER_M_OPL
+from common.atomic import atomic_path
+from common.units import PS_PER_M_OPL
 
 
 def opl_to_ps(opl_m: np.ndarray | float) -> np.ndarray | float:

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import atomic_path
+from common.atomic import atomic_path
 
 CHECKPOINT_NAME = "checkpoint.npz"
 FORMAT_VERSION = 2  # 2: float32 frame sums (and frames_carry); 1 held float64 frames

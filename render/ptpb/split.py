@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import atomic_path, write_json_atomic
+from common.atomic import atomic_path, write_json_atomic
 from pipeline.schema.ptpb import PTPBConfig
 from render.ptpb.api import RenderResult, core_inputs, render
 
@@ -364,7 +364,7 @@ def calibrate(
     timings give both. The start-up is the larger probe's, with one iteration at the real size; the finish
     (averaging the sums) scales with the pixels; the peak memory is the larger probe's with its image
     buffers replaced by the real film's."""
-    from pipeline.memory import PeakMemory
+    from common.memory import PeakMemory
 
     iterations = int(core_settings.get("iterations", 0))
     width, height = int(scene["camera"]["width"]), int(scene["camera"]["height"])

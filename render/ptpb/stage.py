@@ -14,17 +14,16 @@ its completed iterations and raises KeyboardInterrupt, so a partial render is ne
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from pathlib import Path
 
 import numpy as np
 
-from geometry.meshio import MESH_SUFFIXES, read_mesh
-from pipeline.atomic import atomic_path, save_npy_atomic, write_json_atomic
-from pipeline.memory import PeakMemory
+from common.atomic import atomic_path, save_npy_atomic, write_json_atomic
+from common.memory import PeakMemory
 from pipeline.schema.ptpb import PTPBConfig
+from render.engine import load_core_scene
 from render.output.exr import write_exr
 from render.output.figures import rendered_image
 from render.output.files import FRAME_UNITS, FRAMES, OURS_STATS, STEADY, FrameAxis, describe_frames, write_frames
@@ -43,32 +42,6 @@ from render.ptpb.split import (
 )
 
 log = logging.getLogger(__name__)
-
-
-def _load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    if path.suffix == ".npz":
-        with np.load(path) as z:
-            return np.asarray(z["vertices"], np.float32), np.asarray(z["faces"], np.uint32)
-    if path.suffix.lower() in MESH_SUFFIXES:
-        return read_mesh(path)
-    raise ValueError(f"{path}: meshes must be .npz (vertices, faces) or one of {', '.join(MESH_SUFFIXES)}")
-
-
-def load_core_scene(scene_dir: str | Path) -> dict:
-    """Read the scene folder that the scene stage wrote (``scene_dir/ptpb_scene.json`` and the meshes
-    it names) as the core's scene dict, ready for ``render``; exported as ``render.ptpb.load_scene``."""
-    scene_dir = Path(scene_dir)
-    path = scene_dir / "ptpb_scene.json"
-    if not path.exists():
-        raise FileNotFoundError(f"{path} not found: the scene stage must write the PTPB scene description there")
-    scene = json.loads(path.read_text())
-    for i, shape in enumerate(scene.get("shapes", [])):
-        if "mesh" in shape:
-            v, f = _load_mesh(scene_dir / shape.pop("mesh"))
-            shape["vertices"], shape["faces"] = v, f
-        elif "vertices" not in shape:
-            raise ValueError(f"{path}: shapes[{i}] needs 'mesh' or 'vertices'/'faces'")
-    return scene
 
 
 def run_render_stage(
@@ -125,7 +98,7 @@ def run_render_stage(
     if plan is not None:
         log.info("render: %s", plan["summary"])
     frames_written = False
-    with PeakMemory() as memory:  # this render's own peak, not the whole run's (pipeline/memory.py)
+    with PeakMemory() as memory:  # this render's own peak, not the whole run's (common/memory.py)
         if shards > 1 and shards_dir is not None:
             result = _render_in_shards(scene, cfg, shards, Path(shards_dir), out_dir / FRAMES, fingerprint, quiet)
             frames_written = True

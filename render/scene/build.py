@@ -346,7 +346,7 @@ def direct_arrivals(
     places mesh i at each of its translations (instanced copies). With ``shadows``, also NaN where the light
     does not reach the point directly: the side the camera sees faces away from it, or a mesh lies between
     (a spot light's cone is not applied)."""
-    from render.ptpb.raytrace import RayEngine
+    from render.engine import RayEngine
 
     engine = RayEngine()
     for i, (v, f) in enumerate(meshes):
@@ -495,7 +495,7 @@ def build_scene(
     )
     film = fit_window(cfg.film, arrivals)
     if arrivals.shape[0] and np.any(np.isfinite(arrivals)):
-        from render.output.figures import arrival_map
+        from render.scene.figures import arrival_map
 
         first = np.nanmin(np.where(np.isfinite(arrivals), arrivals, np.inf), axis=0)
         arrival_map(

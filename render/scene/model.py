@@ -38,7 +38,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from pipeline.atomic import write_json_atomic
+from common.atomic import write_json_atomic
 
 SCENE_FORMAT = "penitentes-scene"
 SCENE_VERSION = 1

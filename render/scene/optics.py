@@ -23,7 +23,7 @@ from typing import Literal, TypeVar
 import numpy as np
 import yaml
 
-from pipeline.paths import OPTICS_PRESETS_DIR, optics_preset_names
+from common.paths import OPTICS_PRESETS_DIR, optics_preset_names
 
 RHO_ICE = 917.0  # kg m-3
 WAVELENGTHS_NM = (640.0, 530.0, 470.0)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.atomic import write_json_atomic
+from common.atomic import write_json_atomic
 from pipeline.schema.scene import SceneConfig
 from render.scene import optics as optics_mod
 from render.scene.build import build_scene

@@ -91,7 +91,7 @@ def test_flat_ice_keeps_the_absorbed_shortwave_above_the_sky_loss():
     assert 0.4 < net / ((1 - cfg.albedo) * incident) < 0.5  # ~ the reference's eps = 0.5 on flat ice
 
 
-def test_lab_preset_grows_at_lambda_star():
+def test_lab_preset_grows_at_lambda_star(validation):
     """V1 from white noise in a full sun-path run: the scattered light and all other absorbed light are
     spread over the e-folding depth l, so the field selects lambda* = 2 pi l (4.4 cm for l = 7 mm)."""
     cfg = GeometryConfig(**yaml.safe_load((SITES / "lab_micro.yaml").read_text())["geometry"])
@@ -100,6 +100,13 @@ def test_lab_preset_grows_at_lambda_star():
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     assert cfg.initial_wavelength is None  # white noise: nothing seeds the answer
     lambda_star = 2 * np.pi * cfg.optical_efolding_depth
+    validation.record(
+        "V1 lab preset, full sun path from white noise: dominant wavelength [m]",
+        metrics.dominant_wavelength(grown.height, cfg.spacing),
+        reference=lambda_star,
+        tolerance="±15 %",
+        against="2π l of the preset's e-folding depth",
+    )
     assert metrics.dominant_wavelength(grown.height, cfg.spacing) == pytest.approx(lambda_star, rel=0.15)
     assert 5 < grown.height.std() / h0.std() < 500  # grows, but stays a lab-sized form
 

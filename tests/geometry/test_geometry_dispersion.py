@@ -43,7 +43,7 @@ def _grow_1d(h, spacing, duration, dt):
     return h
 
 
-def test_growth_rates_fit_dispersion_relation_and_lambda_star():
+def test_growth_rates_fit_dispersion_relation_and_lambda_star(validation):
     n = 256
     length = 8 * LAMBDA_STAR
     spacing = length / n
@@ -65,6 +65,13 @@ def test_growth_rates_fit_dispersion_relation_and_lambda_star():
     assert np.all(np.abs(measured - expected) <= 0.05 * SIGMA_STAR), (measured / SIGMA_STAR, expected / SIGMA_STAR)
     fitted_a, fitted_d = np.linalg.lstsq(np.column_stack((k, -(k**2))), measured, rcond=None)[0]
     fitted_lambda = 4 * np.pi * fitted_d / fitted_a
+    validation.record(
+        "V1 linear dispersion: λ* = 4π D / A_B fitted to measured growth rates [m]",
+        fitted_lambda,
+        reference=LAMBDA_STAR,
+        tolerance="±10 %",
+        against="the linear model's σ(k) = A_B |k| − D k²",
+    )
     assert abs(fitted_lambda / LAMBDA_STAR - 1) < 0.10, fitted_lambda
     assert abs(fitted_a**2 / (4 * fitted_d) / SIGMA_STAR - 1) < 0.10
 
@@ -104,16 +111,30 @@ def _white_noise_onset(efolding_depth: float, seed: int) -> float:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_white_noise_peaks_at_two_pi_l(seed):
+def test_white_noise_peaks_at_two_pi_l(seed, validation):
     """V1: the onset wavelength is 2 pi l (4.4 cm for l = 7 mm), within 20 %."""
     efolding_depth = 0.007
     onset = _white_noise_onset(efolding_depth, seed)
+    validation.record(
+        f"V1 onset wavelength from white noise, l = 7 mm, seed {seed} [m]",
+        onset,
+        reference=ablation.onset_wavelength(efolding_depth),
+        tolerance="±20 %",
+        against="2π l, the linear model's fastest mode",
+    )
     assert onset == pytest.approx(ablation.onset_wavelength(efolding_depth), rel=0.2)
 
 
-def test_doubling_l_doubles_the_onset_wavelength():
+def test_doubling_l_doubles_the_onset_wavelength(validation):
     """V7: twice the e-folding depth, twice the onset wavelength, within 20 %."""
     ratio = _white_noise_onset(0.014, 4) / _white_noise_onset(0.007, 5)
+    validation.record(
+        "V7 onset wavelength at l = 14 mm / at l = 7 mm",
+        ratio,
+        reference=2.0,
+        tolerance="±20 %",
+        against="exact scaling with l",
+    )
     assert ratio == pytest.approx(2.0, rel=0.2)
 
 

@@ -45,17 +45,31 @@ def test_uniform_horizon_gives_cos_squared():
     assert centre == pytest.approx(0.5, abs=0.015)
 
 
-def test_spherical_bowl_sky_view_and_scattered_light():
+def test_spherical_bowl_sky_view_and_scattered_light(validation):
     z, spacing, r = _bowl(64, 0.25)
     f = 0.2
     horizons = irradiance.compute_horizons(z, spacing, 32, rotation=0.1)
     inside = r < 0.45
+    validation.record(
+        "V2 spherical bowl, depth / diameter 0.25: mean sky view inside",
+        horizons.sky_view[inside].mean(),
+        reference=1 - f,
+        tolerance="±1 %",
+        against="the bowl's closed form 1 − f",
+    )
     assert horizons.sky_view[inside].mean() == pytest.approx(1 - f, rel=0.01)
     for albedo, elevation in ((0.5, 60.0), (0.8, 30.0), (0.9, 45.0)):
         beta = np.radians(elevation)
         sun = np.array([0.0, np.cos(beta), np.sin(beta)])
         budget = irradiance.radiation_budget(z, spacing, sun, 1000.0, 0.0, albedo, horizons, bounces=10)
         scattered = 1000.0 * np.sin(beta) * albedo * f * (1 - f) / (1 - albedo * f)
+        validation.record(
+            f"V2 spherical bowl, albedo {albedo}, sun at {elevation:g}°: scattered irradiance inside [W m⁻²]",
+            budget.terrain[inside].mean(),
+            reference=scattered,
+            tolerance="±5 %",
+            against="the spherical cavity's uniform radiosity, a f (1 − f) / (1 − a f) of the beam",
+        )
         assert budget.terrain[inside].mean() == pytest.approx(scattered, rel=0.05)
         if elevation < 40:  # a low sun shadows part of the bowl; shadowed points get only scattered light
             shadowed = inside & (budget.sun_visible == 0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
+from common.paths import optics_preset_names
 from pipeline.config import ConfigError, load_config
-from pipeline.paths import optics_preset_names
 
 DEMO = "configs/demo.yaml"
 

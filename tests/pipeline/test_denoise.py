@@ -19,8 +19,8 @@ from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
 from render.output.exr import read_exr
+from render.output.guides import guide_buffers
 from render.output.metrics import per_frame_relmse, relmse
-from render.scene.guides import guide_buffers
 
 pytestmark = pytest.mark.mitsuba
 

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from block_scene import block_config
 
+from common.paths import PROJECT_ROOT
 from pipeline.manifest import outputs_intact, read_manifest
-from pipeline.paths import PROJECT_ROOT
 
 STAGES = ("scene", "render", "composite", "compare")
 

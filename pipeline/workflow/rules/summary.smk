@@ -19,4 +19,4 @@ rule summary:
         workdir=WORKDIR,
         python=PYTHON,
     shell:
-        "cd {params.workdir:q} && {params.python:q} -m render.output.summary {input.workflow:q} > {log:q} 2>&1"
+        "cd {params.workdir:q} && {params.python:q} -m pipeline.sweep {input.workflow:q} > {log:q} 2>&1"

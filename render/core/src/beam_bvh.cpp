@@ -6,7 +6,7 @@
 // at a time in float (SSE). Leaves point into the builder's own primitive array, whose slots are
 // overwritten with the pieces' lines after the build: no second copy of the pieces, and the leaf
 // test reads 32 contiguous bytes a piece instead of the beam records. Each of these choices was
-// measured on the benchmark scene's camera pass; the figures are in CHANGELOG.md.
+// timed on the benchmark scene's camera pass (benchmarks/bench_ptpb.py writes the current figures).
 #include <embree3/rtcore.h>
 #include <embree3/rtcore_builder.h>
 
@@ -45,8 +45,8 @@ struct alignas(64) Node4 {
 constexpr std::uintptr_t kLeafTag = 1;
 constexpr std::uintptr_t kLeafCountMask = 0xE;
 constexpr unsigned kMaxLeafPieces = 8;
-// The builder's largest leaf: with the 4-wide float leaf test, 8 measured faster than 4 and 2
-// (CHANGELOG.md).
+// The builder's largest leaf: with the 4-wide float leaf test, 8 timed faster than 4 and 2
+// (benchmarks/bench_ptpb.py times the camera pass).
 constexpr unsigned kLeafSize = 8;
 static_assert(kLeafSize <= kMaxLeafPieces, "a leaf's count must fit its pointer's tag bits");
 // Readable slots past the last piece of a leaf: the 4-wide leaf test reads whole groups of four.
@@ -158,7 +158,7 @@ class BeamBvh final : public BeamAccel {
     // about two pieces on average. Long beams diced at a few R (the cube of DESIGN.md §10 test 4:
     // tens of pieces a beam at R = 1 cm) let the build dominate a render and deepened every query.
     // For short beams 6R rather than 4R trades a little render time for fewer pieces, and so less
-    // peak memory when beams dominate it (figures in CHANGELOG.md).
+    // peak memory when beams dominate it (benchmarks/bench_ptpb.py reports it).
     double dice = dice_length_;
     if (!(dice > 0)) {
       double total_length = 0.0;
@@ -261,7 +261,7 @@ class BeamBvh final : public BeamAccel {
         const auto* piece = reinterpret_cast<const PieceLine*>(item & ~(kLeafTag | kLeafCountMask));
         const int count = int((item & kLeafCountMask) >> 1) + 1;
         // The child box test above has already passed; the pieces' own boxes would pass three in four
-        // times, and testing them cost more than it saved (measured on the camera pass). So every piece
+        // times, and testing them cost more than it saved (timed on the camera pass). So every piece
         // goes to the exact test.
 #if defined(__SSE2__)
         for (int i = 0; i < count; i += 4) {
