@@ -2,23 +2,23 @@
 flat snows of the lidar bias table (optical diameter 0.1 / 0.5 / 1 mm at 300 and 550 kg/m3) and over the demo's
 grown penitente field, for ATLAS's strong and weak beams, by day and by night (render/lidar/LIDAR.md §9).
 
-    .venv/bin/python benchmarks/atl06_track.py [--length 5000] [--out benchmarks/results] [--reuse]
-        [--penitentes-lidar runs/<name>/lidar]
+    .venv/bin/python benchmarks/atl06_track.py [--length 5000] [--reuse] [--penitentes-lidar runs/<name>/lidar]
 
 Every surface is first a lidar run of `configs/lidar/icesat2.yaml` (11 m footprint, 1.5 ns pulse) whose 532 nm
 impulse response (Warren & Brandt 2008 ice) the tracks draw their photons from. Flat snow renders 16 x 16 pixels
 for 20 s (the snow is the same under every pixel); the penitentes 48 x 48 pixels for 60 s over the tiled field,
 which the geometry stage grows first (about 3 min). Each track is `--length` metres of shots; the bias is the
 mean over segments of h_li minus the true surface (the flat-equivalent height), its spread the standard deviation
-over segments. A third beam, "strong x4", is the strong beam at the ATBD test data's white-surface rate. Writes atl06.md and atl06.csv to --out and prints the acceptance checks and the time of 1 km.
---reuse takes the shots a past run copied under --out/atl06; --penitentes-lidar takes the penitentes' shot from
-another lidar run (a field grown by another version of the demo).
+over segments. A third beam, "strong x4", is the strong beam at the ATBD test data's white-surface rate. Writes
+benchmarks/results/atl06.md and atl06.csv (results/local/ with another --length or --penitentes-lidar) and prints the
+acceptance checks and the time of 1 km. --reuse takes the shots a past run copied under benchmarks/results/atl06/
+(git-ignored); --penitentes-lidar takes the penitentes' shot from another lidar run (a field grown by another
+version of the demo).
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import shutil
@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _results import RESULTS, is_standard, start, write_results
 
 from pipeline.config import load_config
 from pipeline.runner import run_stages
@@ -43,21 +44,6 @@ SUN_ELEVATION_DEG = 30.0  # "day": the sun 30 degrees up; "night": no background
 STRONG_X4 = Beam("strong x4", 4 * STRONG.energy_share, STRONG.channels, STRONG.dead_time_ns)
 FLAT = ["lidar.target=flat_snow", "lidar.pixels=16", "lidar.time_budget_s=20", "name=atl06_flat"]
 PENITENTES = ["lidar.pixels=48", "lidar.time_budget_s=60", "name=atl06_penitentes"]
-COLUMNS = (
-    "surface",
-    "beam",
-    "light",
-    "signal_per_shot",
-    "background_mhz",
-    "segments",
-    "bias_cm",
-    "spread_cm",
-    "bias_without_fpb_cm",
-    "fpb_cm",
-    "window_m",
-    "photons_per_segment",
-    "waveform_median_cm",
-)
 
 
 def surfaces() -> list[tuple[str, str, list[str]]]:
@@ -138,7 +124,7 @@ def row_of(surface: str, shot: dict, beam: Beam, light: str, length: float, seed
 
 
 def acceptance() -> list[str]:
-    """The figures tests/lidar/test_lidar_atl06.py asserts, over 2 km of a bare plane of albedo 0.9."""
+    """The figures tests/render/lidar/test_lidar_atl06.py asserts, over 2 km of a bare plane of albedo 0.9."""
     bin_width, z_ref = 0.005, 0.5
     impulse = surface_impulse(0.0, 0.9 / math.pi, z_ref, 0.0, bin_width, 400)
     plane = z_ref - 0.5 * (int(np.flatnonzero(impulse)[0]) + 0.5) * bin_width
@@ -168,12 +154,8 @@ def acceptance() -> list[str]:
     return lines
 
 
-def write(rows: list[dict], checks: list[str], timing: str, out: Path, length: float) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "atl06.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
+def markdown(rows: list[dict], checks: list[str], timing: str, length: float) -> str:
+    """The results' text: the table of ``rows`` (row_of), the acceptance checks and the time of 1 km."""
     header = (
         "| surface | beam | light | signal photons a shot | background [MHz] | segments | bias [cm] | spread [cm] "
         "| bias without FPB correction [cm] | FPB correction [cm] | window [m] | photons a segment "
@@ -186,27 +168,28 @@ def write(rows: list[dict], checks: list[str], timing: str, out: Path, length: f
         for r in rows
     )
     text = (
-        f"# ATL06-like heights from photon counting ({length / 1000:g} km per track)\n\n"
+        f"ATL06-like heights from photon counting, {length / 1000:g} km per track. "
         "Height bias = mean over 40 m segments of h_li minus the flat-equivalent surface (negative: below it); "
         "spread: standard deviation over segments. Waveform median: the pulsed waveform's median as a height "
         "(lidar stage, same impulse response).\n\n" + header + body + "\nChecks (bare plane, 2 km):\n\n"
     )
-    text += "".join(f"- {line}\n" for line in checks) + f"\n{timing}\n"
-    (out / "atl06.md").write_text(text, encoding="utf-8")
+    return text + "".join(f"- {line}\n" for line in checks) + f"\n{timing}\n"
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--length", type=float, default=5000.0, help="metres of track per row")
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results"))
-    parser.add_argument("--reuse", action="store_true", help="take the shots copied under --out/atl06 by a past run")
+    parser.add_argument(
+        "--reuse", action="store_true", help="take the shots copied under benchmarks/results/atl06 by a past run"
+    )
     parser.add_argument(
         "--penitentes-lidar", type=Path, help="the lidar folder of a penitente run to use instead of rendering one"
     )
     args = parser.parse_args()
     shots = {}
     for label, slug, overrides in surfaces():
-        folder = args.out / "atl06" / slug
+        folder = RESULTS / "atl06" / slug
         if slug == "penitentes" and args.penitentes_lidar is not None:
             folder = args.penitentes_lidar
         elif not (args.reuse and (folder / "waveform.npz").is_file()):
@@ -228,8 +211,9 @@ def main() -> None:
                 )
     checks = acceptance()
     print("\n".join(checks))
-    write(rows, checks, timing, args.out, args.length)
-    print(f"table: {args.out}/atl06.md")
+    standard = is_standard(parser, args, ignore=("reuse",))
+    path = write_results("atl06", markdown(rows, checks, timing, args.length), run, rows=rows, standard=standard)
+    print(f"table: {path}")
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ that part of the reference's noise is measured from the tiled baseline, which re
 (``missed_reference_noise``), and a second ratio takes it out of every error as well. Same phase model and time
 bins on both sides: both render the scene folder's scene.
 Ours uses the medium estimator that `auto` picks for the scene (reported per row). Writes
-benchmarks/results/bench_dense.{md,csv}.
+benchmarks/results/bench_dense.md and .csv (results/local/ with other arguments than the defaults).
 
     .venv/bin/python benchmarks/bench_dense.py              # all rows, 60 s each side
     .venv/bin/python benchmarks/bench_dense.py --seconds 10 --rows dense_cube
@@ -38,9 +38,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
-from ptpb_bench_scene import RESULTS, bench_scene, reference  # noqa: E402
+from _results import is_standard, start, write_results  # noqa: E402
+from ptpb_bench_scene import bench_scene, reference  # noqa: E402
 
-from pipeline.atomic import write_text_atomic  # noqa: E402
 from pipeline.config import load_config  # noqa: E402
 
 ROWS = {
@@ -150,6 +150,7 @@ def ratios_against_best(
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="wall time of each side per row [s]")
     parser.add_argument("--rows", nargs="*", default=list(ROWS), choices=list(ROWS))
@@ -167,11 +168,7 @@ def main() -> None:
         "| ours/reference frame energy |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    csv = [
-        "row,estimator_media_on_paths,seconds,ours_relmse,ours_late_relmse,"
-        + ",".join(f"{b}_relmse,{b}_late_relmse,{b}_spp,{b}_seconds" for b in BASELINES)
-        + ",tuned_rr,tiles,ratio,late_ratio,missed_noise,late_missed_noise,ratio_missed_out,late_ratio_missed_out"
-    ]
+    rows = []
     for row in args.rows:
         cfg = load_config(ROWS[row])
         set_rr = cfg.reference.rr_depth if isinstance(cfg.reference.rr_depth, int) else 0
@@ -237,23 +234,38 @@ def main() -> None:
             f"| **{ratio_text}** ({late_text}) | {floored_text} ({floored_late_text}; {floors[0]:.2g}) "
             f"| {seconds:.0f} | {energy_text} |"
         )
-        csv.append(
-            f"{row},{stats['path_media']},{seconds:.3f},{e_ours:.6g},{e_ours_late:.6g},"
-            + ",".join(f"{b.relmse:.6g},{b.late_relmse:.6g},{b.spp},{b.seconds:.3f}" for b in (shipped, tuned, tiled))
-            + f",{tuned_rr},{cfg.reference.tiles},{ratio:.6g},{late_ratio:.6g}"
-            + f",{floors[0]:.6g},{floors[1]:.6g},{floored[0]:.6g},{floored[1]:.6g}"
+        rows.append(
+            {
+                "row": row,
+                "estimator_media_on_paths": stats["path_media"],
+                "seconds": seconds,
+                "ours_relmse": e_ours,
+                "ours_late_relmse": e_ours_late,
+                **{
+                    f"{name}_{key}": getattr(runs[name], key)
+                    for name in BASELINES
+                    for key in ("relmse", "late_relmse", "spp", "seconds")
+                },
+                "tuned_rr": tuned_rr,
+                "tiles": cfg.reference.tiles,
+                "ratio": ratio,
+                "late_ratio": late_ratio,
+                "missed_noise": floors[0],
+                "late_missed_noise": floors[1],
+                "ratio_missed_out": floored[0],
+                "late_ratio_missed_out": floored[1],
+            }
         )
     lines.append("")
     lines.append(
         "mitransient's errors are brought to ours' time as relMSE x time; in brackets: the late third of the "
         "frames, and the spp each baseline rendered. The reference's missed noise (light both its halves miss) "
         "is measured from the tiled baseline, the reference's own estimator (n/a where their roulette differs or "
-        "the reference renders each channel on its own)."
+        "the reference renders each channel on its own). A ratio is n/a where a corrected error is at or below "
+        "zero, inside the reference's own noise."
     )
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(RESULTS / "bench_dense.md", "\n".join(lines) + "\n")
-    write_text_atomic(RESULTS / "bench_dense.csv", "\n".join(csv) + "\n")
     print("\n".join(lines))
+    write_results("bench_dense", "\n".join(lines), run, rows=rows, standard=is_standard(parser, args))
 
 
 if __name__ == "__main__":

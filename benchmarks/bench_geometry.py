@@ -1,7 +1,7 @@
 """Geometry-stage time against grid size: growth + mesh + metrics.
 
 Run: .venv/bin/python benchmarks/bench_geometry.py  (SEASON=0 skips the 512^2 season, ~10 min)
-Writes benchmarks/results/geometry.csv and geometry.md. The 256^2 row is the demo's grid (the Tapado site
+Writes benchmarks/results/geometry.md and .csv (results/local/ with SEASON=0). The 256^2 row is the demo's grid (the Tapado site
 preset over 8 m, 60 days as in configs/demo.yaml: 3.1 cm cells, inside the converged range of
 geometry/DESIGN.md 7); the last row is issue 27's target, a 60-day season at that converged cell over
 16 m (512^2), which must stay under 15 minutes on 2 cores. Pictures are excluded (~4 s).
@@ -18,8 +18,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _results import start, write_results  # noqa: E402
+
 from geometry import ablation, mesh, metrics  # noqa: E402
-from pipeline.atomic import write_text_atomic  # noqa: E402
 from pipeline.config import load_raw  # noqa: E402
 from pipeline.schema.geometry import GeometryConfig  # noqa: E402
 
@@ -58,6 +59,7 @@ def bench(cells: int, domain: float, days: int) -> dict:
 
 
 def main() -> None:
+    run = start()
     rows = []
     for cells, domain, days in CASES:
         row = bench(cells, domain, days)
@@ -67,18 +69,9 @@ def main() -> None:
             f"horizons {row['horizons_s']:.2f} s)  mesh {row['mesh_s']:.2f} s  total {row['total_s']:.2f} s",
             flush=True,
         )
-    out = Path(__file__).resolve().parent / "results"
-    out.mkdir(exist_ok=True)
-    keys = list(rows[0])
-    lines = [",".join(keys)] + [
-        ",".join(f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]) for k in keys) for r in rows
-    ]
-    write_text_atomic(out / "geometry.csv", "\n".join(lines) + "\n")
     md = [
-        "# Geometry stage: time against grid size",
-        "",
-        f"Machine: {os.cpu_count()} cores (shared; load average {os.getloadavg()[0]:.1f} at the end). Tapado "
-        "preset from its correlated start; growth + mesh + metrics; pictures excluded (~4 s, grid-independent).",
+        "Geometry stage: time against grid size. Tapado preset from its correlated start; growth + mesh + metrics; "
+        "pictures excluded (~4 s, grid-independent).",
         "",
         "| grid | domain [m] | days | growth [s] | per day [s] | horizons [s] | mesh [s] | metrics [s] | total [s] | "
         "triangles | crest spacing [m] | H [m] |",
@@ -91,8 +84,8 @@ def main() -> None:
         f"{r['crest_spacing_m']:.2f} | {r['crest_to_trough_m']:.2f} |"
         for r in rows
     ]
-    write_text_atomic(out / "geometry.md", "\n".join(md) + "\n")
-    print("\n".join(md[4:]))
+    print("\n".join(md[2:]))
+    write_results("geometry", "\n".join(md), run, rows=rows, standard=os.environ.get("SEASON", "1") != "0")
 
 
 if __name__ == "__main__":

@@ -1,11 +1,11 @@
 """PTPB performance on configs/bench/ptpb.yaml: equal error against mitransient (transient) and Mitsuba
 volpath (steady), one gate-mode pass against T single-gate passes, throughput, thread scaling and peak
-memory. Every row comes from one run on one machine; the table names the machine and its load.
+memory. Every row comes from one run on one machine; the results' header names the machine and its load.
 
 Run with `make bench` (or `.venv/bin/python benchmarks/bench_ptpb.py`; `--quick` for a smoke run with
-small budgets). Prints the table and writes benchmarks/results/ptpb.csv, ptpb.md and
-ptpb_error_vs_time.png. The first run also builds the scene and renders the long reference
-(mitransient at reference.transient_spp, minutes), both cached under benchmarks/results/cache/.
+small budgets). Prints the table and writes benchmarks/results/ptpb.md, ptpb.csv and
+ptpb_error_vs_time.png (with --quick, to results/local/). The first run also builds the scene and renders
+the long reference (mitransient at reference.transient_spp, minutes), both cached under benchmarks/results/cache/.
 
 Equal error: our error-against-time curve (per-frame relMSE against the reference with the
 reference's own noise taken out, benchmarks/ptpb_bench_scene.py; mean of two seeds) is set against the
@@ -20,13 +20,10 @@ mi.render passes after one warm-up render that compiles their kernels.
 from __future__ import annotations
 
 import argparse
-import csv
 import hashlib
-import io
 import json
 import math
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -37,9 +34,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ptpb_bench_scene import REPO, RESULTS, FrameError, bench_scene, reference  # noqa: E402
+from _results import LOCAL, RESULTS, load_average, machine, start, write_results  # noqa: E402
+from ptpb_bench_scene import REPO, FrameError, bench_scene, reference  # noqa: E402
 
-from pipeline.atomic import write_text_atomic  # noqa: E402
 from pipeline.config import load_config  # noqa: E402
 
 CONFIG = REPO / "configs" / "bench" / "ptpb.yaml"
@@ -55,20 +52,6 @@ def digest(*arrays: np.ndarray) -> str:
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()[:16]
-
-
-def loadavg() -> str:
-    return "/".join(f"{x:.2f}" for x in os.getloadavg())
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def time_to_reach(curve: list[tuple[float, float]], target: float) -> tuple[float | None, str]:
@@ -301,8 +284,8 @@ def memory_worker(spec: dict) -> None:
     """Runs in its own process: one render, then prints its peak RSS against frames + beams."""
     import psutil
 
+    from render.engine import load_core_scene
     from render.ptpb.api import render
-    from render.ptpb.stage import load_core_scene
 
     cfg = load_config(CONFIG)
     core = load_core_scene(bench_scene(cfg))
@@ -391,13 +374,6 @@ class Table:
         lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
         lines += ["| " + " | ".join(str(r[k]).replace("|", "/") for k in keys) + " |" for r in self.rows]
         return "\n".join(lines)
-
-    def csv(self) -> str:
-        buf = io.StringIO()
-        writer = csv.DictWriter(buf, fieldnames=list(self.rows[0]))
-        writer.writeheader()
-        writer.writerows(self.rows)
-        return buf.getvalue()
 
 
 def plot(path: Path, transient: dict, steady: dict) -> None:
@@ -496,11 +472,10 @@ def main() -> None:
         memory_worker(json.loads(args.memory_worker))
         return
 
-    from render.ptpb.stage import load_core_scene
+    from render.engine import load_core_scene
 
     quick = args.quick
-    started = time.perf_counter()
-    load_start = loadavg()
+    run = start()
     config = load_config(CONFIG)
     scene_dir = bench_scene(config)
     ref = reference(scene_dir, config.reference)
@@ -513,9 +488,9 @@ def main() -> None:
     table.add(
         "setup",
         "machine",
-        f"{cpu_model()}, {os.cpu_count()} cores",
+        machine(),
         "",
-        note=f"load average (1/5/15 min) at start {load_start}",
+        note=f"load average (1/5/15 min) at start {load_average(run.load)}",
     )
     table.add(
         "setup",
@@ -631,7 +606,7 @@ def main() -> None:
 
     # 5. Scaling with threads.
     print("thread scaling ...", flush=True)
-    load = loadavg()
+    load = load_average()
     repeats = 1 if quick else 3
     best, cpu, hashes = scaling(core, cfg, 4 if quick else 6, repeats)
     speedup = best[1] / best[THREADS]
@@ -690,17 +665,19 @@ def main() -> None:
         )
 
     table.add(
-        "setup", "bench time", f"{time.perf_counter() - started:.0f} s", "", note=f"load average at the end {loadavg()}"
+        "setup",
+        "bench time",
+        f"{time.perf_counter() - run.clock:.0f} s",
+        "",
+        note=f"load average at the end {load_average()}",
     )
     text = table.markdown()
     print("\n" + text)
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    header = "# PTPB benchmark (benchmarks/bench_ptpb.py)\n\n"
-    write_text_atomic(RESULTS / "ptpb.md", header + text + "\n")
-    write_text_atomic(RESULTS / "ptpb.csv", table.csv())
+    figure = (LOCAL if quick else RESULTS) / "ptpb_error_vs_time.png"
+    figure.parent.mkdir(parents=True, exist_ok=True)
     reach = lambda curve, ours: curve.seconds_for(ours[-1][1])[1]  # noqa: E731  (spp to our final error)
     plot(
-        RESULTS / "ptpb_error_vs_time.png",
+        figure,
         {
             "ours (PTPB, bins)": ([(t, e) for t, e, _ in ours_t], "o-"),
             "mitransient, this run": (mitr.curve(), "s-"),
@@ -714,7 +691,8 @@ def main() -> None:
             "prbvolpath, expected V/n": (prb.expected_curve(reach(prb, ours_s)), ":"),
         },
     )
-    print(f"wrote {RESULTS / 'ptpb.md'}, ptpb.csv and ptpb_error_vs_time.png")
+    write_results("ptpb", text, run, rows=table.rows, standard=not quick)
+    print(f"wrote {figure.relative_to(REPO)}")
 
 
 if __name__ == "__main__":

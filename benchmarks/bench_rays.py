@@ -1,20 +1,17 @@
 """Ray-engine throughput: 1M rays against a 1M-triangle height-field mesh, on 1 and 2 threads.
 
 Run with `make bench` (or `.venv/bin/python benchmarks/bench_rays.py`). Prints a table and writes
-benchmarks/results/rays.csv and rays.md.
+benchmarks/results/rays.md and .csv.
 """
 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
+from _results import start, write_results
 
-from pipeline.atomic import write_text_atomic
-from render.ptpb.raytrace import RayEngine
-
-RESULTS = Path(__file__).resolve().parent / "results"
+from render.engine import RayEngine
 
 
 def rough_terrain(cells_per_side: int, size_m: float = 10.0, seed: int = 0):
@@ -32,6 +29,7 @@ def rough_terrain(cells_per_side: int, size_m: float = 10.0, seed: int = 0):
 
 
 def main() -> None:
+    run = start()
     ray_count = 1_000_000
     vertices, faces = rough_terrain(708)  # 2 * 708^2 = 1.00M triangles
     engine = RayEngine()
@@ -83,10 +81,7 @@ def main() -> None:
     lines += ["| " + " | ".join(str(r[h]) for h in header) + " |" for r in rows]
     table = "\n".join(lines) + "\n"
     print(table)
-    RESULTS.mkdir(exist_ok=True)
-    write_text_atomic(RESULTS / "rays.md", table)
-    csv_lines = [",".join(header)] + [",".join(str(r[h]) for h in header) for r in rows]
-    write_text_atomic(RESULTS / "rays.csv", "\n".join(csv_lines) + "\n")
+    write_results("rays", table, run, rows=rows)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Issue 28's quality check for the full assets: how clean their delivered frames are, measured on a crop.
+"""Issue 28's quality check for the full assets: how clean their delivered frames are, judged on a crop.
 
 A full 1920x1080 film rendered 16 times longer would take a day, so the check renders a window of it: a
 ``--crop`` WxH window at the centre of the asset's frame, at the asset's own pixel size, iterations and light
@@ -26,7 +26,8 @@ checks it (an unbiased render's error against the truth is its variance).
     python benchmarks/crop_quality.py configs/assets/video.yaml
     python benchmarks/crop_quality.py configs/assets/video.yaml --iterations 16 --factor 16
 
-Runs go to ``runs/<asset name>_crop*``; the results are written to ``--out`` as JSON and Markdown.
+Runs go to ``runs/<asset name>_crop*``. The table goes to benchmarks/results/crop_quality_<asset name>.md and
+.csv, every figure to a JSON file beside it (git-ignored); with other options than the defaults, to results/local/.
 """
 
 from __future__ import annotations
@@ -40,13 +41,15 @@ from pathlib import Path
 
 import numpy as np
 
+from common.atomic import write_json_atomic
 from pipeline.config import load_config
 from pipeline.runner import run_dir, run_stages
 from pipeline.stages import STAGES
 from render.output.denoise import TemporalRoughness, denoise_film, denoise_frame
-from render.scene.guides import guide_buffers
+from render.output.guides import guide_buffers
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import LOCAL, RESULTS, is_standard, start, write_results  # noqa: E402
 from ptpb_bench_scene import FrameError  # noqa: E402
 
 
@@ -91,6 +94,7 @@ def flicker(frames: np.ndarray) -> float:
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("config", type=Path, help="an asset config (configs/assets/video.yaml)")
     parser.add_argument("--crop", default="240x135", help="window size WxH at the frame's centre")
@@ -105,7 +109,6 @@ def main() -> None:
         "--seed + 10; negative: none)",
     )
     parser.add_argument("--set", action="append", default=[], help="a further override, as the CLI's --set")
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/crop_quality"))
     args = parser.parse_args()
 
     width, height = (int(v) for v in args.crop.split("x"))
@@ -153,9 +156,9 @@ def main() -> None:
         )
         return np.load(path)
 
-    start = time.perf_counter()
+    t0 = time.perf_counter()
     denoised = delivered(delivered_run)
-    denoise_s = time.perf_counter() - start
+    denoise_s = time.perf_counter() - t0
 
     steady_raw = np.load(delivered_run / "render" / "steady.npy")
     steady_error = FrameError(*(np.load(run / "render" / "steady.npy")[None] for run in halves))
@@ -219,12 +222,12 @@ def main() -> None:
             f"measures the same). Taken out too, against the truth: raw {raw_truth.mean():.4f}, denoised "
             f"{denoised_truth[0].mean():.4f} and {denoised_truth[1].mean():.4f} ({ratios[0]:.3f} and {ratios[1]:.3f} of raw).",
         ]
-    args.out.mkdir(parents=True, exist_ok=True)
-    stem = args.out / f"{asset.name}_{width}x{height}_{iterations}"
-    stem.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
+    standard = is_standard(parser, args, ignore=("config",))
+    name = f"crop_quality_{asset.name}"
+    write_json_atomic((RESULTS if standard else LOCAL) / f"{name}.json", result)
     lines = [
-        f"# {args.config}: a {width}x{height} window at the centre, {iterations} iterations against "
-        f"{iterations * args.factor}",
+        f"`{args.config}`: a {width}x{height} window at the centre, {iterations} iterations against "
+        f"{iterations * args.factor}.",
         "",
         f"Render {delivered_s:.0f} s, reference {reference_s:.0f} s, denoising {denoise_s:.1f} s; "
         f"{held.size} frames hold over 1 % of the energy.",
@@ -249,8 +252,12 @@ def main() -> None:
         f"reference {result['flicker']['reference']:.4f}.",
         *truth_lines,
     ]
-    stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    rows = [
+        {"frame": int(frame), "raw_relmse": a, "denoised_relmse": b, "reference_noise": n}
+        for frame, a, b, n in zip(held, raw_error, denoised_error, reference_noise, strict=True)
+    ]
+    write_results(name, "\n".join(lines), run, rows=rows, standard=standard)
 
 
 if __name__ == "__main__":

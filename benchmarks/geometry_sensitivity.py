@@ -8,8 +8,9 @@ the lean toward the equator, the ridges' angle off E-W and the growth of the RMS
 
 Run: .venv/bin/python benchmarks/geometry_sensitivity.py [--grid 256] [--domain 4] [--days 60] [--seed 7]
      [--jobs 2]
-Writes benchmarks/results/geometry_sensitivity.md. The default (256^2 over 4 m: 1.6 cm cells, inside every
-resolution guard even for l = 3 cm; 13 seasons) takes about 10 minutes on 2 cores.
+Writes benchmarks/results/geometry_sensitivity.md and .csv (results/local/ with other arguments, --jobs aside).
+The default (256^2 over 4 m: 1.6 cm cells, inside every resolution guard even for l = 3 cm; 13 seasons) takes
+about 10 minutes on 2 cores.
 """
 
 from __future__ import annotations
@@ -24,14 +25,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _results import is_standard, start, write_results  # noqa: E402
+
 from geometry import ablation, metrics, stage  # noqa: E402
-from pipeline.atomic import write_text_atomic  # noqa: E402
 from pipeline.config import load_raw  # noqa: E402
 from pipeline.schema.geometry import GeometryConfig  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SITE = ROOT / "configs" / "presets" / "sites" / "tapado.yaml"
-OUT = ROOT / "benchmarks" / "results" / "geometry_sensitivity.md"
 
 # (row label, the two changed values); the row's key is the label's first word.
 CHANGES = [
@@ -86,6 +87,7 @@ def _cells(runs: list[dict]) -> list[str]:
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--grid", type=int, default=256)
     parser.add_argument("--domain", type=float, default=4.0)
@@ -111,13 +113,21 @@ def main() -> None:
         label = f"{key} {' / '.join(f'{v:.3g}' for v in values)}"
         rows.append(f"| {label} | " + " | ".join(_cells(pair)) + " |")
     text = (
-        f"# Sensitivity of the Tapado season: {args.grid}² over {args.domain:g} m, {args.days} days, seed {args.seed}\n\n"
+        f"Sensitivity of the Tapado season: {args.grid}² over {args.domain:g} m, {args.days} days, seed {args.seed}. "
+        "A changed row's cells give the fields grown at its two values, in the order its label lists them.\n\n"
         + header
         + "\n".join(rows)
         + "\n"
     )
-    write_text_atomic(OUT, text)
     print(text)
+    csv_rows = [
+        {"change": next(iter(point), "none"), "value": next(iter(point.values()), ""), **result}
+        for point, result in zip(points, results)
+    ]
+    for row in csv_rows:
+        del row["warnings"]
+    standard = is_standard(parser, args, ignore=("jobs",))
+    write_results("geometry_sensitivity", text, run, rows=csv_rows, standard=standard)
 
 
 if __name__ == "__main__":

@@ -7,8 +7,8 @@ per grid, with the Richardson extrapolation from the three finest grids and each
 Run: .venv/bin/python benchmarks/grid_convergence.py [--grids 128 256 512] [--seeds 1 2 3] [--jobs 2]
      [--config configs/demo.yaml] [--set geometry.days=60 ...]
 Writes benchmarks/results/grid_convergence/<grid>_<seed>.json and .npz (the numbers and the final field
-of one run, reused unless --force) and
-benchmarks/results/grid_convergence.md. On 2 cores the default study (128^2, 256^2, 512^2 over 8 m, seeds
+of one run, reused unless --force; git-ignored) and the table to benchmarks/results/grid_convergence.md and .csv
+(results/local/<name>.md with other arguments than the defaults, --jobs and --force aside). On 2 cores the default study (128^2, 256^2, 512^2 over 8 m, seeds
 1-3) takes about 10 minutes.
 """
 
@@ -26,8 +26,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _results import is_standard, start, write_results  # noqa: E402
+
+from common.atomic import write_json_atomic  # noqa: E402
 from geometry import ablation, convergence, stage  # noqa: E402
-from pipeline.atomic import write_json_atomic, write_text_atomic  # noqa: E402
 from pipeline.config import load_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,7 +84,7 @@ def _task(args: tuple[str, list[str], int, int, Path]) -> dict:
 def table(rows: list[dict], grids: list[int], seeds: list[int], title: str) -> list[str]:
     """Markdown: per-seed and seed-mean values per grid, Richardson from the three finest, errors."""
     by = {(r["grid"], r["seed"]): r for r in rows}
-    lines = [f"# {title}", ""]
+    lines = [f"{title}.", ""]
     header = "| grid (cell) | " + " | ".join(t for _, t, _ in QUANTITIES) + " | growth [s] |"
     lines += [header, "|" + "---|" * (len(QUANTITIES) + 2)]
     means = {}
@@ -123,6 +125,7 @@ def table(rows: list[dict], grids: list[int], seeds: list[int], title: str) -> l
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default=str(ROOT / "configs" / "demo.yaml"))
     parser.add_argument("--grids", type=int, nargs="+", default=[128, 256, 512])
@@ -149,8 +152,10 @@ def main() -> None:
         f" with {', '.join(args.overrides)}" if args.overrides else ""
     )
     lines = table(rows, sorted(args.grids), args.seeds, title)
-    write_text_atomic(OUT / f"{args.name}.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
+    csv_rows = [{k: v for k, v in row.items() if k != "relief_history_m"} for row in rows]
+    standard = is_standard(parser, args, ignore=("jobs", "force"))
+    write_results(args.name, "\n".join(lines), run, rows=csv_rows, standard=standard)
 
 
 if __name__ == "__main__":

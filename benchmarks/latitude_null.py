@@ -6,7 +6,7 @@ RMS) after 60 days and over the preset's whole season, and 65 S over Tapado. Pen
 so a start that lets 65 S grow as much as Tapado is one the model's latitude null cannot carry.
 
 Run: .venv/bin/python benchmarks/latitude_null.py [--rms 0.03 0.045] [--seeds 7 8]
-Writes benchmarks/results/latitude_null.md and prints it.
+Prints the table and writes benchmarks/results/latitude_null.md and .csv (results/local/ with other arguments).
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _results import is_standard, start, write_results  # noqa: E402
+
 from geometry import ablation  # noqa: E402
-from pipeline.atomic import write_text_atomic  # noqa: E402
 from pipeline.config import load_raw  # noqa: E402
 from pipeline.schema.geometry import GeometryConfig  # noqa: E402
 
@@ -44,6 +45,7 @@ def relief_growth(preset: str, rms: float, seed: int) -> tuple[float, float, int
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rms", type=float, nargs="+", default=[0.03, 0.045])
     parser.add_argument("--seeds", type=int, nargs="+", default=[7, 8])
@@ -53,6 +55,7 @@ def main() -> None:
         "| 65°S, season [m] | 65°S / Tapado, season |",
         "|---|---|---|---|---|---|---|---|",
     ]
+    rows = []
     for rms in args.rms:
         for seed in args.seeds:
             t60, tend, days = relief_growth("tapado.yaml", rms, seed)
@@ -62,15 +65,23 @@ def main() -> None:
                 f"{hend / tend:.0%} |"
             )
             print(lines[-1], flush=True)
+            rows.append(
+                {
+                    "start_rms_m": rms,
+                    "seed": seed,
+                    "tapado_day60_m": t60,
+                    "s65_day60_m": h60,
+                    "tapado_season_m": tend,
+                    "s65_season_m": hend,
+                }
+            )
     text = (
         f"RMS relief grown (final minus start) on 128² over 4 m; the season is the preset's {days} days.\n\n"
         + "\n".join(lines)
         + "\n"
     )
-    out = ROOT / "benchmarks" / "results" / "latitude_null.md"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out, text)
     print(text)
+    write_results("latitude_null", text, run, rows=rows, standard=is_standard(parser, args))
 
 
 if __name__ == "__main__":

@@ -6,9 +6,10 @@ airborne (1 m) footprints (render/lidar/LIDAR.md §7).
 
 Every point is a lidar run of `configs/lidar/icesat2.yaml` with overrides. The penitente points share one
 run folder, so the field grows once (the geometry stage's manifest matches) and only the lidar stage runs
-again; each point's lidar folder is copied under --out/<point>/lidar, and render.lidar.table writes
-biases.csv / biases.md there. A bare Lambertian plane is shot too, and waveforms.png shows the 532 nm
-pulsed waveforms of the bare plane, flat snow and the grown field (1 mm grains, 550 kg/m3, ICESat-2).
+again; each point's lidar folder is copied under --out/<point>/lidar. The table (render.lidar.table's rows) goes
+to docs/lidar/biases.md and biases.csv, which the site includes (docs/benchmarks/lidar.md). A bare Lambertian
+plane is shot too, and docs/lidar/waveforms.png shows the 532 nm pulsed waveforms of the bare plane, flat snow
+and the grown field (1 mm grains, 550 kg/m3, ICESat-2).
 """
 
 from __future__ import annotations
@@ -18,12 +19,16 @@ import shutil
 import time
 from pathlib import Path
 
+from _results import REPO, start, write_results
+
+from common.atomic import atomic_path
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
 from render.lidar.table import normalised_waveform, rows_of, write_table
 
 CONFIG = Path("configs/lidar/icesat2.yaml")
+TABLE = REPO / "docs" / "lidar"  # the site's copy of the table and the figure
 GRAINS = {"d0.1mm": 0.0001, "d0.5mm": 0.0005, "d1mm": 0.001}
 DENSITIES = (300, 550)
 FOOTPRINTS = {"icesat2": 11.0, "airborne": 1.0}
@@ -63,11 +68,13 @@ def plot_waveforms(folders: dict[str, Path], path: Path) -> None:
     ax.set_title("532 nm, 1.5 ns pulse: bare plane, flat snow and penitentes (11 m footprint)", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
     plt.close(fig)
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/lidar"))
     args = parser.parse_args()
@@ -82,8 +89,14 @@ def main() -> None:
         shutil.copytree(Path(cfg.runs_dir) / cfg.name / "lidar", folder / "lidar")
         runs.append(folder)
         print(f"{name}: {time.perf_counter() - t0:.1f} s", flush=True)
-    write_table([row for run in runs for row in rows_of(run)], args.out)
-    print(f"table: {args.out}/biases.md")
+    rows = [row for folder in runs for row in rows_of(folder)]
+    _, markdown = write_table(rows, args.out)
+    intro = (
+        "Range bias [cm] of each estimator, per point, channel and reference height (render/lidar/LIDAR.md): "
+        "the estimator's range minus the reference's; positive: the surface reads low.\n\n"
+    )
+    write_results("biases", intro + markdown.read_text(encoding="utf-8"), run, rows=rows, folder=TABLE)
+    print(f"table: {TABLE.relative_to(REPO)}/biases.md")
     bare = load_config(CONFIG, ["lidar.target=bare", "name=lidar_bare"])
     run_stages(bare, STAGES, quiet=True)
     shutil.copytree(Path(bare.runs_dir) / bare.name / "lidar", args.out / "bare" / "lidar", dirs_exist_ok=True)
@@ -93,9 +106,9 @@ def main() -> None:
             "flat snow": args.out / "flat_d1mm_rho550",
             "penitentes (demo field)": args.out / "penitentes_icesat2_d1mm_rho550",
         },
-        args.out / "waveforms.png",
+        TABLE / "waveforms.png",
     )
-    print(f"figure: {args.out}/waveforms.png")
+    print(f"figure: {TABLE.relative_to(REPO)}/waveforms.png")
 
 
 if __name__ == "__main__":

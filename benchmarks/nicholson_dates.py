@@ -6,7 +6,7 @@ the share of cells steeper than 45° (morphology.slope_deg), the ridge azimuth a
 start, and the stage (pitted, suncups, penitentes; DESIGN.md 7, *Stages*).
 
 Run: .venv/bin/python benchmarks/nicholson_dates.py [--config configs/demo.yaml] [--seeds 1 2] [--set KEY=VALUE ...]
-Writes benchmarks/results/nicholson_dates.md and prints it.
+Prints the table and writes benchmarks/results/nicholson_dates.md and .csv (results/local/ with other arguments).
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _results import is_standard, start, write_results  # noqa: E402
+
 from geometry import ablation, metrics, morphology  # noqa: E402
-from pipeline.atomic import write_text_atomic  # noqa: E402
 from pipeline.config import load_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,10 +62,13 @@ def survey_rows(config: str, overrides: list[str], seed: int) -> list[dict]:
     return rows
 
 
-def table(config: str, overrides: list[str], seeds: list[int]) -> str:
+def table(config: str, overrides: list[str], seeds: list[int]) -> tuple[str, list[dict]]:
+    """The Markdown table (seeds side by side in each cell) and its rows, one per seed and date."""
     runs = [survey_rows(config, overrides, s) for s in seeds]
+    shown = Path(config).resolve()
+    shown_config = shown.relative_to(ROOT) if shown.is_relative_to(ROOT) else shown
     lines = [
-        f"Config {config} {' '.join(overrides)}; seeds {' / '.join(map(str, seeds))}.",
+        f"Config {shown_config} {' '.join(overrides)}; seeds {' / '.join(map(str, seeds))}.",
         "",
         "| date (season day) | crest spacing [m] | H [m] | crests per m² | facets > 45° | ridge azimuth [°] (coherence)"
         " | mean lowering [m] | stage |",
@@ -81,20 +85,20 @@ def table(config: str, overrides: list[str], seeds: list[int]) -> str:
             f"{cell('density', '{:.1f}')} | {cell('steep', '{:.0%}')} | {azimuth} | {cell('lowering', '{:.2f}')} | "
             f"{' / '.join(r[i]['stage'] for r in runs)} |"
         )
-    return "\n".join(lines) + "\n"
+    rows = [{"seed": seed, **row} for seed, run in zip(seeds, runs, strict=True) for row in run]
+    return "\n".join(lines) + "\n", rows
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default=str(ROOT / "configs" / "demo.yaml"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
     args = parser.parse_args()
-    text = table(args.config, args.overrides, args.seeds)
-    out = ROOT / "benchmarks" / "results" / "nicholson_dates.md"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out, text)
+    text, rows = table(args.config, args.overrides, args.seeds)
     print(text)
+    write_results("nicholson_dates", text, run, rows=rows, standard=is_standard(parser, args))
 
 
 if __name__ == "__main__":

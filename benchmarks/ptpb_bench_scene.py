@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.atomic import atomic_path
+from common.atomic import atomic_path
 from pipeline.config import config_hash
 from render.output.metrics import RELMSE_EPSILON
 

@@ -1,4 +1,4 @@
-"""What two known variance reductions would gain on the dense cube's near-surface light, measured on a model
+"""What two known variance reductions would gain on the dense cube's near-surface light, found on a model
 before building them in the core (issue 28, render/core/DESIGN.md §12, *Near the lit face*).
 
 The dense cube's error (bench_dense.py) is that of its bright early frames, light that enters the lit face and
@@ -26,20 +26,19 @@ making fewer deep vertices is one the core has mostly taken already.
 Every variant is unbiased: the script prints each one's largest deviation from the core's walk per lit frame
 in standard errors.
 
-    python benchmarks/walk_model.py [--paths 200000] [--seeds 1 2] [--out benchmarks/results/walk_model.md]
+    python benchmarks/walk_model.py [--paths 200000] [--seeds 1 2]
+
+Writes benchmarks/results/walk_model.md and .csv (results/local/ with other arguments than these defaults).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-
-from pipeline.atomic import write_text_atomic
+from _results import is_standard, start, write_results
 
 ALBEDO = 0.9995
 BIN_WIDTH = 32.6  # the cube's 0.0816 m of OPL in mean free paths (sigma_t = 400 per m)
@@ -176,10 +175,10 @@ def relative_variance(m: Moments, core: Moments, frames: np.ndarray, with_cost: 
 
 
 def main() -> None:
+    run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--paths", type=int, default=200_000, help="camera walks per variant, seed and offset")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/walk_model.md"))
     args = parser.parse_args()
     if args.paths < 1000:
         raise SystemExit(f"--paths {args.paths}: at least 1000 walks, or the variances mean nothing")
@@ -189,7 +188,7 @@ def main() -> None:
         "| relvar / core's, lit frames | vertices a walk | largest deviation [std. errors] |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    started = time.perf_counter()
+    rows = []
     for seed in args.seeds:
         for offset in (0.0, BIN_WIDTH / 2):
             runs = [moments(v, args.paths, seed * 1000 + k, offset) for k, v in enumerate(VARIANTS)]
@@ -203,18 +202,30 @@ def main() -> None:
                 ratios = [relative_variance(m, core, frames) for frames in (lit, first_lit, late)]
                 error = np.sqrt((core.variance + m.variance) / args.paths)
                 deviation = np.max(np.abs(m.mean - core.mean)[lit] / error[lit])
+                relvar = relative_variance(m, core, lit, with_cost=False)
                 lines.append(
                     f"| {variant.name} | {seed} | {offset:.1f} | {ratios[0]:.3f} | {ratios[1]:.3f} | {ratios[2]:.3f} "
-                    f"| {relative_variance(m, core, lit, with_cost=False):.3f} | {m.cost:.1f} | {deviation:.1f} |"
+                    f"| {relvar:.3f} | {m.cost:.1f} | {deviation:.1f} |"
+                )
+                rows.append(
+                    {
+                        "variant": variant.name,
+                        "seed": seed,
+                        "arrival_mfp": offset,
+                        "relvar_cost_lit": ratios[0],
+                        "relvar_cost_first_lit": ratios[1],
+                        "relvar_cost_late_third": ratios[2],
+                        "relvar_lit": relvar,
+                        "vertices_per_walk": m.cost,
+                        "largest_deviation_std_errors": float(deviation),
+                    }
                 )
                 print(lines[-1], flush=True)
-    header = (
-        f"# Near-surface walk model (benchmarks/walk_model.py)\n\n{args.paths} walks a variant, seed and arrival; "
-        f"albedo {ALBEDO}, bins of {BIN_WIDTH} mean free paths, {time.perf_counter() - started:.0f} s.\n\n"
+    intro = (
+        f"Near-surface walk model: {args.paths} walks a variant, seed and arrival; albedo {ALBEDO}, bins of "
+        f"{BIN_WIDTH} mean free paths. Ratios are against the core's walk (the first row of each seed and arrival).\n\n"
     )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(args.out, header + "\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    write_results("walk_model", intro + "\n".join(lines), run, rows=rows, standard=is_standard(parser, args))
 
 
 if __name__ == "__main__":

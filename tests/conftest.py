@@ -8,6 +8,10 @@ import os
 
 from hypothesis import settings
 
+# The validation fixture and --validation-report (tests/validation_report.py; docs/validation.md), and pytester,
+# with which tests/test_validation_report.py runs the plugin on a small test file.
+pytest_plugins = ["validation_report", "pytester"]
+
 settings.register_profile("ci", derandomize=True, database=None)
 if os.environ.get("CI"):
     settings.load_profile("ci")
