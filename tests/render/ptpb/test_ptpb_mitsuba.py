@@ -223,11 +223,10 @@ def test_transient_bins_match_mitransient_frame_by_frame(validation):
     """Issue 4: per-frame means within 3 % of mitransient for every frame above 1 % of the energy.
 
     The frame mean is the image-plane average of a box-filtered pinhole film, the same at any
-    resolution, so ours renders the cube at 72 x 72 (9x the queries of 24 x 24 per light path,
-    for 30 % more time) against mitransient at 24 x 24. Measured on 64 mitransient runs and 16 of
-    ours: single runs scatter by 0.4-2.8 % (mitransient, 16384 spp) and 1-5 % (ours, 48 x 40k
-    paths) per frame; the 16-run means agree within 2.1 % (the first frame, the kernel's loss at
-    the lit faces) and within 0.85 % on average. About 3 minutes on 2 cores."""
+    resolution, so ours renders the cube at 72 x 72 (nine times the queries of 24 x 24 per light
+    path) against mitransient at 24 x 24. A single run of either side scatters by a few per cent a
+    frame, so both sides average 16 runs; the first frame carries the kernel's loss at the lit faces
+    and sets the tolerance."""
     film = {**cube_scene("bins")["film"], "temporal_bins": 27, "bin_width_opl": 0.15}  # the pulse and its tail
     refs = [mitsuba_cube(spp=16384, seed=seed, film=film) for seed in range(3, 19)]
     ref_profiles = np.array([frames.mean(axis=(1, 2, 3)) for frames, _ in refs])
