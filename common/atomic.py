@@ -80,6 +80,17 @@ def save_npy_atomic(path: str | os.PathLike[str], array: np.ndarray) -> Path:
     return Path(path)
 
 
+def save_figure_atomic(fig: Any, path: Path, *, pdf: bool = False) -> list[Path]:
+    """A matplotlib figure as PNG at ``path`` (150 dpi, tight) and, with ``pdf``, beside it as PDF; the caller
+    closes the figure."""
+    written = []
+    for target in [path] + ([path.with_suffix(".pdf")] if pdf else []):
+        with atomic_path(target) as tmp:
+            fig.savefig(tmp, dpi=150, bbox_inches="tight")
+        written.append(target)
+    return written
+
+
 def _json_default(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()

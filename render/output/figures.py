@@ -15,17 +15,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from common.atomic import atomic_path  # noqa: E402
+from common.atomic import save_figure_atomic  # noqa: E402
 from common.units import PS_PER_M_OPL  # noqa: E402
 from render.output.tonemap import ToneCurve, luminance, to_display  # noqa: E402
 
 
 def _save(fig, path: Path, pdf: bool = False) -> list[Path]:
-    written = []
-    for target in [path] + ([path.with_suffix(".pdf")] if pdf else []):
-        with atomic_path(target) as tmp:
-            fig.savefig(tmp, dpi=150, bbox_inches="tight")
-        written.append(target)
+    written = save_figure_atomic(fig, path, pdf=pdf)
     plt.close(fig)
     return written
 

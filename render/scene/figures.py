@@ -14,7 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from common.atomic import atomic_path  # noqa: E402
+from common.atomic import save_figure_atomic  # noqa: E402
 from common.units import PS_PER_M_OPL  # noqa: E402
 
 
@@ -25,7 +25,6 @@ def arrival_map(first_arrival_opl: np.ndarray, path: Path, title: str) -> list[P
     fig.colorbar(shown, ax=ax, label="first direct arrival (ps)", shrink=0.8)
     ax.set_title(title, fontsize=10)
     ax.axis("off")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=150, bbox_inches="tight")
+    written = save_figure_atomic(fig, path)
     plt.close(fig)
-    return [path]
+    return written
