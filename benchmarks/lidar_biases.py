@@ -59,10 +59,14 @@ def plot_waveforms(folders: dict[str, Path], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4), dpi=150)
+    highest = 0.0
     for label, folder in folders.items():
-        ax.plot(*normalised_waveform(folder), label=label, lw=1.3)
+        height, pulsed = normalised_waveform(folder)
+        ax.plot(height, pulsed, label=label, lw=1.3)
+        highest = max(highest, float(height[pulsed > 1e-3].max()))
     ax.axvline(0.0, color="0.5", ls=":", lw=0.8)
-    ax.set_xlim(-1.5, 1.2)
+    # Up to where the last waveform (the penitentes' ridges) falls to 1e-3 of its peak; the left is the tail.
+    ax.set_xlim(-2.0, highest + 0.1)
     ax.set_xlabel("height of the return above the flat-equivalent surface [m]")
     ax.set_ylabel("pulsed waveform / its peak")
     ax.set_title("532 nm, 1.5 ns pulse: bare plane, flat snow and penitentes (11 m footprint)", fontsize=9)

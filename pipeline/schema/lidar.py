@@ -46,6 +46,15 @@ class LidarConfig(StrictModel):
     first_return_threshold: float = Field(
         0.5, gt=0, lt=1, description="First-return estimator: fraction of the pulsed waveform's peak [-]."
     )
+    group_index: float | None = Field(
+        None,
+        ge=1,
+        le=2,
+        description="The snow's clock: time per metre of path in the homogenised snow, in units of 1/c (the snow "
+        "medium's region index). null: (1 - phi) + B phi n_g, phi = density/917, B = 1.6, n_g the group index of "
+        "ice at 532 nm, for all three channels (render/lidar/LIDAR.md §5.1); 1: the index-matched clock, light at "
+        "c [-].",
+    )
     depth: float | None = Field(
         None,
         gt=0,

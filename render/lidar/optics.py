@@ -48,6 +48,21 @@ _WARREN_BRANDT_2008_K = MappingProxyType(
         1080.0: 1.740e-6,
     }
 )
+# Real index of ice n against wavelength [nm], the same rows and commit: W&B 2008, wl2008 / refice2008_r (four
+# decimals, as printed there), for the group index n - lambda dn/dlambda.
+_WARREN_BRANDT_2008_N = MappingProxyType(
+    {
+        520.0: 1.3121,
+        530.0: 1.3117,
+        540.0: 1.3114,
+        550.0: 1.3110,
+        1050.0: 1.3007,
+        1060.0: 1.3005,
+        1070.0: 1.3003,
+        1080.0: 1.3002,
+    }
+)
+_N_TABLE_STEP_NM = 10.0  # the rows' spacing: the group index's central difference spans one row either side
 # Picard et al. 2016: ki2016_clean_i is the absorption coefficient gamma [m-1] on wls2016 = 320, 325, ... 600 nm.
 _PICARD_2016_GAMMA = MappingProxyType(
     {
@@ -93,6 +108,36 @@ def ice_imaginary_index(wavelength_nm: float, data_set: str = DEFAULT_ICE_DATA_S
 def ice_absorption_coefficient(wavelength_nm: float, data_set: str = DEFAULT_ICE_DATA_SET) -> float:
     """γ = 4πk/λ of bulk ice [m⁻¹]: W&B 2008 0.03500 at 532 nm and 22.42 at 1064 nm; Picard 2016 0.04848 at 532."""
     return 4.0 * math.pi * ice_imaginary_index(wavelength_nm, data_set) / (wavelength_nm * 1e-9)
+
+
+def _ice_real_index(wavelength_nm: float) -> float:
+    wavelengths = np.array(sorted(_WARREN_BRANDT_2008_N))
+    return float(np.interp(wavelength_nm, wavelengths, [_WARREN_BRANDT_2008_N[w] for w in wavelengths]))
+
+
+def ice_group_index(wavelength_nm: float = 532.0) -> float:
+    """Group index n_g = n − λ dn/dλ of ice (Warren & Brandt 2008 real index, linear between rows): 1.3303 at
+    532 nm, 1.3196 at 1064 nm. dn/dλ is the central difference one table row (10 nm) either side of λ."""
+    wavelength = _check_wavelength(wavelength_nm)
+    step = _N_TABLE_STEP_NM
+    slope = (_ice_real_index(wavelength + step) - _ice_real_index(wavelength - step)) / (2.0 * step)
+    return _ice_real_index(wavelength) - wavelength * slope
+
+
+def snow_group_index(density: float, absorption_enhancement: float = 1.6, wavelength_nm: float = 532.0) -> float:
+    """The snow's clock: time per metre of path in the homogenised (index-matched) medium, in units of 1/c
+    (LIDAR.md §5.1). n_snow = (1 − φ) + B φ n_g, φ = ρ/ρ_ice: per metre of homogenised path light crosses 1 − φ
+    of air and, by the absorption the medium is given (σ_a = B γ φ), B φ of ice, where it runs at the group index
+    n_g (``ice_group_index``). 1.369 at 300 kg m⁻³ and 1.677 at 550 kg m⁻³ with B = 1.6 at 532 nm."""
+    if not (math.isfinite(density) and 0 <= density <= RHO_ICE):
+        raise ValueError(f"density must lie in [0, {RHO_ICE:g}] kg/m3 (0: air, {RHO_ICE:g}: ice), got {density}")
+    if not (math.isfinite(absorption_enhancement) and absorption_enhancement > 0):
+        raise ValueError(
+            f"absorption_enhancement B must be positive (1.6 for natural snow, 1.25 for spheres), got "
+            f"{absorption_enhancement}"
+        )
+    volume_fraction = density / RHO_ICE
+    return (1.0 - volume_fraction) + absorption_enhancement * volume_fraction * ice_group_index(wavelength_nm)
 
 
 @dataclass(frozen=True)
@@ -185,6 +230,8 @@ __all__ = [
     "LASER_WAVELENGTHS_NM",
     "SnowOptics",
     "ice_absorption_coefficient",
+    "ice_group_index",
     "ice_imaginary_index",
+    "snow_group_index",
     "snow_optics",
 ]

@@ -1,13 +1,13 @@
 """The scene of one lidar shot for the PTPB core (render/lidar/LIDAR.md §7.1).
 
-Transport in index-matched snow is reciprocal, so the shot is rendered backwards: the receiver, which
-sees the whole footprint with a uniform response, becomes a plane wave from its direction (a sun of unit
-irradiance pinned to the reference plane), and the laser becomes an orthographic camera over the
-footprint, looking along the beam. A pixel then holds the light that a pencil of the laser at that
-point returns to the receiver, and the footprint's Gaussian weights the pixels afterwards
-(``receiver_weights``), so one render serves any footprint that fits on its film. Both time origins lie
-on the reference plane z = ``reference_height``: light turned back at depth d below it arrives at OPL
-2d, range d.
+Transport in snow behind index-matched faces is reciprocal, its clock (the medium's group index) included,
+so the shot is rendered backwards: the receiver, which sees the whole footprint with a uniform response,
+becomes a plane wave from its direction (a sun of unit irradiance pinned to the reference plane), and the
+laser becomes an orthographic camera over the footprint, looking along the beam. A pixel then holds the
+light that a pencil of the laser at that point returns to the receiver, and the footprint's Gaussian
+weights the pixels afterwards (``receiver_weights``), so one render serves any footprint that fits on its
+film. Both time origins lie on the reference plane z = ``reference_height``: light turned back by a surface d
+below it arrives at OPL 2d, range d; each metre of path in snow of group index n adds n metres of OPL.
 """
 
 from __future__ import annotations
@@ -90,11 +90,20 @@ def receiver_weights(receiver: Receiver, diameter: float, centre: tuple[float, f
     return w / w.sum()
 
 
-def medium(sigma_s: Sequence[float], sigma_a: Sequence[float], g: float) -> dict[str, Any]:
-    """An index-matched medium of the core with per-channel coefficients [1/m] (three of each)."""
+def medium(sigma_s: Sequence[float], sigma_a: Sequence[float], g: float, group_index: float = 1.0) -> dict[str, Any]:
+    """A medium of the core with per-channel coefficients [1/m] (three of each) behind index-matched faces, whose
+    clock runs at ``group_index``: light takes group_index/c per metre of path (``optics.snow_group_index``; 1 is
+    light at c). Behind ``null`` faces the core reads ``ior`` for time alone, never for refraction."""
     if len(sigma_s) != 3 or len(sigma_a) != 3:
         raise ValueError(f"a medium needs three sigma_s and three sigma_a, got {sigma_s} and {sigma_a}")
-    return {"sigma_s": tuple(map(float, sigma_s)), "sigma_a": tuple(map(float, sigma_a)), "g": float(g), "ior": 1.0}
+    if not (math.isfinite(group_index) and group_index >= 1):
+        raise ValueError(f"a medium's group index must be at least 1 (1: light at c), got {group_index}")
+    return {
+        "sigma_s": tuple(map(float, sigma_s)),
+        "sigma_a": tuple(map(float, sigma_a)),
+        "g": float(g),
+        "ior": float(group_index),
+    }
 
 
 def shot_scene(
