@@ -115,3 +115,58 @@ class RenderSettingSpec(TypedDict):
 def render_settings_spec() -> list[RenderSettingSpec]:
     """Every setting the core parses, in the order of for_each_setting, with its key, kind, default,
     choices, bounds, description and whether a config sets it."""
+
+# Snow as grains (register_grains.cpp, render/lidar/grains.py, render/lidar/LIDAR.md §10)
+
+def grains_trace_packing(
+    centres: npt.ArrayLike,
+    radii: npt.ArrayLike,
+    cell_size: float,
+    ice_index: float,
+    ice_group_index: float,
+    ice_absorption: float,
+    photons: int,
+    seed: int,
+    start_opl: float,
+    bin_width_opl: float,
+    temporal_bins: int,
+    cone_half_angle: float,
+    depth_bin_width: float,
+    depth_bins: int,
+    max_path: float,
+    threads: int = 0,
+    progress: Callable[[int, int], bool | None] | None = None,
+) -> dict[str, Any]:
+    """A nadir beam into a periodic packing of ice spheres: centres (N, 3) with x, y in [0, Lc) and z in [-Lc, 0),
+    radii (N,). Returns per-photon sums: ``time_flux``, ``time_cone``, ``air_by_bin``, ``ice_by_bin``
+    (temporal_bins,), ``absorbed_depth`` (depth_bins,) float64 arrays; floats ``albedo``, ``cone_fraction``,
+    ``absorbed``, ``truncated``, ``early``, ``late``, ``exit_opl``, ``air_path``, ``ice_path``, ``exit_air_path``,
+    ``exit_ice_path``, ``sphere_hits``, ``interactions``, ``total_internal_reflections``; ``photons_done`` and
+    ``cancelled``. The GIL is released; ``progress(done, total)`` returning False, or Ctrl-C, stops after the
+    group of photons under way. Identical for any thread count."""
+
+def grains_trace_homogeneous(
+    scattering: float,
+    absorption: float,
+    asymmetry: float,
+    time_index: float,
+    photons: int,
+    seed: int,
+    start_opl: float,
+    bin_width_opl: float,
+    temporal_bins: int,
+    cone_half_angle: float,
+    depth_bin_width: float,
+    depth_bins: int,
+    max_path: float,
+    threads: int = 0,
+    progress: Callable[[int, int], bool | None] | None = None,
+) -> dict[str, Any]:
+    """The same beam and receivers in a homogeneous Henyey–Greenstein half-space; its path is ``air_path``
+    (``ice_path`` 0) and OPL = time_index x path. Same keys as grains_trace_packing."""
+
+def grains_scatter_sphere(
+    radius: float, ice_index: float, ice_absorption: float, rays: int, seed: int = 0
+) -> dict[str, float]:
+    """One sphere lit over its cross-section: ``absorbed`` per incident photon, ``mean_ice_path`` [m],
+    ``mean_cos`` (g without diffraction), ``energy_out`` (1 to rounding), ``total_internal_reflections`` (0)."""

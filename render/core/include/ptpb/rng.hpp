@@ -5,7 +5,14 @@
 
 namespace ptpb {
 
-enum class StreamDomain : std::uint32_t { LightPath = 1, CameraPixel = 2, Test = 3, PathSplit = 4, HopTable = 5 };
+enum class StreamDomain : std::uint32_t {
+  LightPath = 1,
+  CameraPixel = 2,
+  Test = 3,
+  PathSplit = 4,
+  HopTable = 5,
+  Grains = 6
+};
 
 // SplitMix64 finaliser: a bijective avalanche mix, used to hash the key into a PCG state.
 inline std::uint64_t mix64(std::uint64_t z) {
