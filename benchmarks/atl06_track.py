@@ -10,8 +10,9 @@ for 20 s (the snow is the same under every pixel); the penitentes 48 x 48 pixels
 which the geometry stage grows first (about 3 min). Each track is `--length` metres of shots; the bias is the
 mean over segments of h_li minus the true surface (the flat-equivalent height), its spread the standard deviation
 over segments. A third beam, "strong x4", is the strong beam at the ATBD test data's white-surface rate. Writes
-benchmarks/results/atl06.md and atl06.csv (results/local/ with another --length or --penitentes-lidar) and prints the
-acceptance checks and the time of 1 km. --reuse takes the shots a past run copied under benchmarks/results/atl06/
+benchmarks/results/atl06.md and atl06.csv (results/local/ with another --length or --penitentes-lidar), prints the
+acceptance checks and the time of 1 km, and rewrites the README's table from atl06.csv (``--readme`` does only that;
+tests/render/lidar/test_lidar_atl06.py fails while the two differ). --reuse takes the shots a past run copied under benchmarks/results/atl06/
 (git-ignored); --penitentes-lidar takes the penitentes' shot from another lidar run (a field grown by another
 version of the demo).
 """
@@ -19,6 +20,7 @@ version of the demo).
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import math
 import shutil
@@ -26,8 +28,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _results import RESULTS, is_standard, start, write_results
+from _results import REPO, RESULTS, is_standard, start, write_results
 
+from common.atomic import write_text_atomic
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
@@ -44,6 +47,10 @@ SUN_ELEVATION_DEG = 30.0  # "day": the sun 30 degrees up; "night": no background
 STRONG_X4 = Beam("strong x4", 4 * STRONG.energy_share, STRONG.channels, STRONG.dead_time_ns)
 FLAT = ["lidar.target=flat_snow", "lidar.pixels=16", "lidar.time_budget_s=20", "name=atl06_flat"]
 PENITENTES = ["lidar.pixels=48", "lidar.time_budget_s=60", "name=atl06_penitentes"]
+README = REPO / "README.md"
+# The README's lidar section holds the table between these lines; the script writes what lies between.
+README_START = "<!-- ATL06-like table: benchmarks/atl06_track.py writes it from benchmarks/results/atl06.csv -->"
+README_END = "<!-- end of the ATL06-like table -->"
 
 
 def surfaces() -> list[tuple[str, str, list[str]]]:
@@ -176,6 +183,47 @@ def markdown(rows: list[dict], checks: list[str], timing: str, length: float) ->
     return text + "".join(f"- {line}\n" for line in checks) + f"\n{timing}\n"
 
 
+def readme_table(rows: list[dict]) -> str:
+    """The README's compact table of ``rows`` (row_of's, or atl06.csv's as text): bias ± spread [cm] of each surface
+    for the strong and weak beams by day and night, and the waveform median."""
+    cell = {
+        (r["surface"], r["beam"], r["light"]): f"{float(r['bias_cm']):+.1f} ± {float(r['spread_cm']):.1f}" for r in rows
+    }
+    median = {r["surface"]: f"{float(r['waveform_median_cm']):+.1f}" for r in rows}
+    columns = [(beam, light) for beam in ("strong", "weak") for light in ("day", "night")]
+    header = (
+        "| surface | "
+        + " | ".join(f"{beam}, {light}" for beam, light in columns)
+        + " | waveform median |\n"
+        + "|---" * (len(columns) + 2)
+        + "|\n"
+    )
+    body = "".join(
+        f"| {surface} | " + " | ".join(cell[(surface, *column)] for column in columns) + f" | {median[surface]} |\n"
+        for surface in median
+    )
+    return header + body
+
+
+def readme_with_table(text: str, rows: list[dict]) -> str:
+    """``text`` (the README) with ``readme_table(rows)`` between its markers."""
+    if README_START not in text or README_END not in text:
+        raise ValueError(f"README.md lacks the lines {README_START!r} and {README_END!r} that hold the ATL06 table")
+    before, rest = text.split(README_START, 1)
+    return before + README_START + "\n\n" + readme_table(rows) + "\n" + README_END + rest.split(README_END, 1)[1]
+
+
+def csv_rows(path: Path = RESULTS / "atl06.csv") -> list[dict]:
+    """The rows of the committed table, as text."""
+    with path.open(newline="", encoding="utf-8") as file:
+        return list(csv.DictReader(file))
+
+
+def write_readme(rows: list[dict]) -> None:
+    write_text_atomic(README, readme_with_table(README.read_text(encoding="utf-8"), rows))
+    print(f"README table: {README}")
+
+
 def main() -> None:
     run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -186,7 +234,13 @@ def main() -> None:
     parser.add_argument(
         "--penitentes-lidar", type=Path, help="the lidar folder of a penitente run to use instead of rendering one"
     )
+    parser.add_argument(
+        "--readme", action="store_true", help="only rewrite the README's table from benchmarks/results/atl06.csv"
+    )
     args = parser.parse_args()
+    if args.readme:
+        write_readme(csv_rows())
+        return
     shots = {}
     for label, slug, overrides in surfaces():
         folder = RESULTS / "atl06" / slug
@@ -214,6 +268,8 @@ def main() -> None:
     standard = is_standard(parser, args, ignore=("reuse",))
     path = write_results("atl06", markdown(rows, checks, timing, args.length), run, rows=rows, standard=standard)
     print(f"table: {path}")
+    if standard:
+        write_readme(rows)
 
 
 if __name__ == "__main__":

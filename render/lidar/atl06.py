@@ -47,7 +47,6 @@ class SegmentSettings:
     min_spread: float = 20.0  # along track
     max_iterations: int = 20  # [-]
     initial_window: float = 10.0  # the stand-in for ATL03's signal selection
-    histogram_bin: float = 0.0025  # of the residual histogram the first-photon bias is computed on
 
 
 @dataclass(frozen=True)
@@ -94,52 +93,56 @@ def first_photon_bias(
     channels: int,
     dead_time_height: float,
     background_per_m: float,
-    bin_height: float = 0.0025,
 ) -> tuple[float, float]:
     """(median, mean) first-photon-bias corrections [m] of residual heights inside |r| < window/2 (Smith et al.
     2019; the ATBD reference code's ``fpb_corr.m``, read-ICESat-2's ``calc_first_photon_bias``).
 
-    The detected histogram per pulse and channel, N₀(r), gives the probability that a channel is dead at r: it
-    recorded a photon less than a dead time earlier, i.e. higher by less than ``dead_time_height`` = cτ/2,
-    P(r) = Σ_{r < r' ≤ r + cτ/2} N₀(r') (own bin: half). A non-paralysable channel records photons in proportion
-    to its live time, so the received histogram is N₀/(1 − P). The corrections are the (median, mean) of the
-    received signal minus those of the detected signal, the background (``background_per_m`` photons per metre,
-    all pulses) taken off both (on the detected one, reduced by the live fraction).
+    The detected photons per pulse and channel give the probability that a channel is dead at r: it recorded a
+    photon less than a dead time earlier, i.e. higher by at most ``dead_time_height`` = cτ/2, P(r) = (photons in
+    (r, r + cτ/2]) / (pulses · channels), exact for a non-paralysable channel. It records photons in proportion to
+    its live time, so each detected photon stands for 1/(1 − P) received ones. The corrections are the (median,
+    mean) of the received signal minus those of the detected signal, the background (``background_per_m`` photons
+    per metre, all pulses) taken off both (off the detected one thinned by the live fraction). Both medians are
+    read between photons, as ``med_r_fit`` is (``_signal_quantiles``): a median binned finer than the photons
+    are spaced reads a sparse weak beam's correction 1–2 mm short at night (LIDAR.md §9.4).
     """
     if dead_time_height <= 0:
         return 0.0, 0.0
     half = 0.5 * window
-    bins = max(1, math.ceil(window / bin_height))
-    edges = np.linspace(-half, half, bins + 1)
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    counts = np.histogram(np.asarray(residuals, dtype=np.float64), bins=edges)[0].astype(np.float64)
-    per_channel = counts / (n_pulses * channels)
-    reach = max(1, round(dead_time_height / (edges[1] - edges[0])))
-    above = np.concatenate((np.cumsum(per_channel[::-1])[::-1], [0.0]))  # above[k] = Σ_{j ≥ k}
-    upper = np.minimum(np.arange(bins) + 1 + reach, bins)
-    dead = above[np.arange(bins) + 1] - above[upper] + 0.5 * per_channel
-    live = np.clip(1.0 - dead, 1e-3, 1.0)
-    background = background_per_m * (edges[1] - edges[0])
-    detected = counts - live * background
-    received = counts / live - background
-    return (
-        _histogram_median(received, edges) - _histogram_median(detected, edges),
-        _histogram_mean(received, centres) - _histogram_mean(detected, centres),
+    r = np.sort(np.asarray(residuals, dtype=np.float64))
+    r = r[np.abs(r) < half]
+    if r.size < 2:
+        return 0.0, 0.0
+    per_channel = 1.0 / (n_pulses * channels)
+    higher = np.searchsorted(r, r + dead_time_height, side="right") - np.searchsorted(r, r, side="right")
+    weight = 1.0 / np.clip(1.0 - per_channel * higher, 1e-3, 1.0)
+    # Where a photon at r_j leaves its channel dead: [r_j − cτ/2, r_j) inside the window.
+    dead_from = np.maximum(r - dead_time_height, -half)
+    ends = np.append(r, half)
+    dead_below = per_channel * np.clip(np.minimum(ends[:, None], r[None, :]) - dead_from[None, :], 0.0, None).sum(1)
+    received_background = background_per_m * (ends + half)  # its cumulative count from the window's bottom
+    detected_background = received_background - background_per_m * dead_below
+    median = _weighted_median(r, weight, received_background) - _weighted_median(
+        r, np.ones(r.size), detected_background
     )
+    received = weight.sum() - received_background[-1]
+    detected = r.size - detected_background[-1]
+    if not (received > 0 and detected > 0):
+        return median, 0.0
+    dead_moment = per_channel * np.sum(r**2 - dead_from**2) / 2  # ∫ r P(r) dr
+    mean = np.dot(weight, r) / received - (r.sum() + background_per_m * dead_moment) / detected
+    return median, float(mean)
 
 
-def _histogram_median(weights: np.ndarray, edges: np.ndarray) -> float:
-    cumulative = np.cumsum(weights)
-    half = 0.5 * cumulative[-1]
-    k = int(np.argmax(cumulative >= half))
-    before = cumulative[k - 1] if k > 0 else 0.0
-    fraction = (half - before) / weights[k] if weights[k] > 0 else 0.5
-    return float(edges[k] + fraction * (edges[k + 1] - edges[k]))
-
-
-def _histogram_mean(weights: np.ndarray, centres: np.ndarray) -> float:
-    total = weights.sum()
-    return float(np.sum(weights * centres) / total) if total > 0 else 0.0
+def _weighted_median(r: np.ndarray, weights: np.ndarray, background: np.ndarray) -> float:
+    """The median of sorted photons ``r`` of ``weights`` less a background of cumulative count ``background`` (at
+    each photon, then at the window's top): photon k holds the cumulative weight up to half its own, as in
+    ``_signal_quantiles``. 0 when the background leaves no signal."""
+    total = weights.sum() - background[-1]
+    if not total > 0:
+        return 0.0
+    cumulative = np.maximum.accumulate(np.cumsum(weights) - 0.5 * weights - background[:-1])
+    return float(np.interp(0.5 * total, cumulative, r))
 
 
 def _line_fit(dx: np.ndarray, h: np.ndarray) -> tuple[float, float, float]:
@@ -215,7 +218,7 @@ def fit_segment(
     n_signal = inside.size - background_per_m * window
     median = _signal_quantiles(inside, -0.5 * window, background_per_m, n_signal, (0.5,))[0] if n_signal > 1 else 0.0
     fpb_median, fpb_mean = first_photon_bias(
-        inside, window, n_pulses, beam.channels, dead_time_height, background_per_m, settings.histogram_bin
+        inside, window, n_pulses, beam.channels, dead_time_height, background_per_m
     )
     misfit = math.sqrt(float(np.mean(inside**2)))
     return Segment(
