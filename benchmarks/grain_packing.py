@@ -2,12 +2,13 @@
 
 A nadir beam into periodic packings of 2000 ice spheres (render.lidar.grains.pack_spheres), traced exactly in
 geometric optics by the core (render/core/src/grains.cpp), against the homogenised half-space with the spheres'
-own shape factors (B, g = 0.89) with identical source, receivers and binning: index matched, and with the snow's
-clock n_snow = (1 − φ) + B φ n_g. Densities 300 and 550 kg/m³, two packing seeds each, 0.5 mm grains, clear ice
+own shape factors (B, g = 0.89) with identical source, receivers and binning: index matched, with the snow's
+clock n_snow = (1 − φ) + B φ n_g, and with the linear-mixing clock 1 − φ + φ n_ice (Smith et al.'s ``v_eff.py``,
+LIDAR.md §12). Densities 300 and 550 kg/m³, two packing seeds each, 0.5 mm grains, clear ice
 at 532 nm (γ = 0.035 /m) and at 1064 nm (γ = 22 /m, where far fewer grains are met before absorption). At
 550 kg/m³ the packing is also traced with 0.25 and 1 mm grains (seed 1).
 
-    python benchmarks/grain_packing.py [--photons 50000] [--homogenised-photons 120000] [--seeds 1 2]
+    python benchmarks/grain_packing.py [--photons 50000] [--homogenised-photons 120000] [--seeds 1 2] [--spheres 16000]
 
 Writes benchmarks/results/grain_packing.md and .csv (results/local/ with other arguments than these defaults).
 """
@@ -23,6 +24,7 @@ from render.lidar.grains import (
     TraceSettings,
     compare,
     homogenised_preset,
+    ice_refractive_index,
     pack_spheres,
     snow_clock,
     trace_homogenised,
@@ -33,7 +35,7 @@ from render.scene.optics import RHO_ICE
 DENSITIES = (300.0, 550.0)
 DIAMETER = 5e-4  # m
 DENSE_SIZES = (2.5e-4, 1e-3)  # m, the second and third sizes at 550 kg/m3
-COUNT = 2000  # spheres in the periodic cell
+COUNT = 2000  # spheres in the periodic cell, 12-15 grains wide (16 000 read the same within the seeds' scatter)
 WINDOW_OPL = 0.5  # m: mean delays and R(t) shapes over OPL in [-2 mm, 0.5 m)
 # Depth bins of the absorbed-energy profile [m], per wavelength: a tenth of an e-folding depth or less.
 DEPTH_BIN = {532.0: 1e-2, 1064.0: 5e-4}
@@ -65,6 +67,11 @@ def point(density: float, diameter: float, seeds: list[int], args: argparse.Name
         clocked_halves = [trace_homogenised(preset, h, clock) for h in halves]
         index_matched = plain_halves[0].merged(plain_halves[1])
         clocked = clocked_halves[0].merged(clocked_halves[1])
+        phi = density / RHO_ICE
+        linear_clock = 1.0 - phi + phi * ice_refractive_index(wavelength)
+        linear = trace_homogenised(preset, halves[0], linear_clock).merged(
+            trace_homogenised(preset, halves[1], linear_clock)
+        )
         # The other forms only show how little the phase function matters: a quarter of the photons.
         forms = settings(wavelength, args.homogenised_photons // 4, HOMOGENISED_SEEDS[0])
         geometric = trace_homogenised(homogenised_preset(density, diameter, wavelength, "geometric"), forms)
@@ -77,7 +84,7 @@ def point(density: float, diameter: float, seeds: list[int], args: argparse.Name
         delay_halves = [h.mean_delay(WINDOW_OPL) for h in clocked_halves]
         albedo_halves = [h["albedo"] for h in plain_halves]
         for seed in seeds:
-            packing = pack_spheres(density / RHO_ICE, diameter, COUNT, seed)
+            packing = pack_spheres(density / RHO_ICE, diameter, args.spheres, seed)
             t0 = time.process_time()
             traced = trace_packing(packing, settings(wavelength, args.photons, seed), wavelength)
             cpu = time.process_time() - t0
@@ -106,6 +113,9 @@ def point(density: float, diameter: float, seeds: list[int], args: argparse.Name
                 efold_geometric=geometric.e_folding_depth(*fit),
                 efold_isotropic=isotropic.e_folding_depth(*fit),
                 delay_geometric=geometric.mean_delay(WINDOW_OPL),
+                linear_clock=linear_clock,
+                delay_ratio_linear=c["delay_packing"] / linear.mean_delay(WINDOW_OPL),
+                spheres=args.spheres,
                 sphere_hits=traced["sphere_hits"],
                 interactions=traced["interactions"],
                 tir=traced["total_internal_reflections"],
@@ -142,21 +152,23 @@ def tables(rows: list[dict[str, object]]) -> str:
         return f"{float(r[name]) * scale:.{digits}f}"
 
     lines = [
-        "Packing (P) against the homogenised preset (H: σ_e = 3φ/d, g = 0.89, σ_a = Bγφ, B = 1.254), index matched "
-        f"and with the snow's clock (H·n). Mean delays are the flux exits' mean OPL below {WINDOW_OPL} m, in mm; "
+        f"Packing (P, {rows[0]['spheres']} spheres a periodic cell) against the homogenised preset (H: σ_e = 3φ/d, "
+        "g = 0.89, σ_a = Bγφ, B = 1.254), index matched, with the snow's clock (H·n) and with the linear-mixing clock "
+        f"1 − φ + φ n_ice (H·n_lin). Mean delays are the flux exits' mean OPL below {WINDOW_OPL} m, in mm; "
         "KS is the largest gap between the distribution functions of R(t) within that window. Acceptance: delay "
         "with the clock within 5 %, albedo within 0.01, e-folding depth within 10 %.",
         "",
         "| ρ [kg/m³] | d [mm] | seed | λ [nm] | n_snow | delay P | delay H | delay H·n | P/H | P/(H·n) | KS P–H | "
-        "KS P–H·n | delay P, cone | delay H·n, cone | verdict |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "KS P–H·n | delay P, cone | delay H·n, cone | n_lin | P/(H·n_lin) | verdict |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             key(r) + f"| {f(r, 'snow_clock')} | {f(r, 'delay_packing', 1e3, 2)} | {f(r, 'delay_homogenised', 1e3, 2)} "
             f"| {f(r, 'delay_clocked', 1e3, 2)} ± {f(r, 'delay_clocked_se', 1e3, 2)} | {f(r, 'delay_ratio_homogenised')} | {f(r, 'delay_ratio_clocked')} "
             f"| {f(r, 'shape_ks_homogenised')} | {f(r, 'shape_ks_clocked')} | {f(r, 'delay_packing_cone', 1e3, 2)} "
-            f"| {f(r, 'delay_clocked_cone', 1e3, 2)} | {verdict(r)} |"
+            f"| {f(r, 'delay_clocked_cone', 1e3, 2)} | {f(r, 'linear_clock')} | {f(r, 'delay_ratio_linear')} "
+            f"| {verdict(r)} |"
         )
     lines += [
         "",
@@ -204,6 +216,7 @@ def main() -> None:
         "--homogenised-photons", type=int, default=120000, help="photons of the homogenised preset (two seeds)"
     )
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2], help="packing seeds")
+    parser.add_argument("--spheres", type=int, default=COUNT, help="spheres in the periodic cell")
     args = parser.parse_args()
     rows: list[dict[str, object]] = []
     for density in DENSITIES:
