@@ -69,7 +69,7 @@ test: setup ## Lint, the docs site (strict), then the C++ tests (ctest) and the 
 	$(MAKE) lint
 	$(MAKE) docs
 	$(MAKE) test-cpp
-	$(PY) -m pytest -m "not slow" -n $(TEST_JOBS) --dist loadfile --validation-report build/validation.md $(PYTEST_ARGS)
+	$(PY) -m pytest -m "not slow" -n $(TEST_JOBS) --dist loadfile --durations=25 --validation-report build/validation.md $(PYTEST_ARGS)
 
 test-all: setup ## Run every test, the slow ones included
 	$(MAKE) test-cpp
