@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from _results import REPO, RESULTS, is_standard, start, write_results
 
-from common.atomic import atomic_path
+from common.atomic import save_figure_atomic
 from pipeline.schema.lidar import LidarConfig
 from render.lidar.optics import snow_group_index
 from render.lidar.retrieval import (
@@ -177,8 +177,7 @@ def plot(cases: list[tuple[str, Observation, GrainRetrieval]], path: Path) -> No
         ax.legend(fontsize=7)
     np.atleast_1d(axes)[0].set_ylabel("photoelectrons per 0.5 ns sample")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+    save_figure_atomic(fig, path)
     plt.close(fig)
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from _results import REPO, start, write_results
 
-from common.atomic import atomic_path
+from common.atomic import save_figure_atomic
 from pipeline.config import load_config
 from pipeline.runner import run_stages
 from pipeline.stages import STAGES
@@ -72,8 +72,7 @@ def plot_waveforms(folders: dict[str, Path], path: Path) -> None:
     ax.set_title("532 nm, 1.5 ns pulse: bare plane, flat snow and penitentes (11 m footprint)", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+    save_figure_atomic(fig, path)
     plt.close(fig)
 
 

@@ -4,6 +4,8 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <memory>
+#include <utility>
 #include <vector>
 
 #include "ptpb/render.hpp"
@@ -34,6 +36,47 @@ py::dict result_stats_dict(const ptpb::RenderStats& s, bool interrupted);
 // remainders float32) as arrays the callback may keep; and back (refusing other precisions).
 py::dict state_dict(const ptpb::RenderState& st);
 ptpb::RenderState parse_state(const py::dict& d);
+
+// Python callbacks (progress, checkpoint) called from a core loop that runs without the GIL (DESIGN.md §9). Each
+// call takes the GIL itself. Ctrl-C, or a KeyboardInterrupt a callback raises, stops the loop and marks the run
+// interrupted; any other exception stops it and is raised again once the loop has returned (rethrow_error).
+class PyCallbacks {
+ public:
+  // With the GIL held: false, to stop, when a signal handler raised (Ctrl-C) or an error is kept.
+  bool signals_allow() {
+    if (PyErr_CheckSignals() == 0) return true;
+    if (PyErr_ExceptionMatches(PyExc_KeyboardInterrupt)) {
+      PyErr_Clear();
+      interrupted_ = true;
+    } else if (!error_) {
+      error_ = std::make_unique<py::error_already_set>();
+    }
+    return false;
+  }
+  // With the GIL held: call() returns the callback's answer; None or a true value goes on.
+  template <typename Call>
+  bool keep_going(Call&& call) {
+    try {
+      py::object answer = call();
+      return answer.is_none() || answer.cast<bool>();
+    } catch (py::error_already_set& e) {
+      if (e.matches(PyExc_KeyboardInterrupt))
+        interrupted_ = true;
+      else if (!error_)
+        error_ = std::make_unique<py::error_already_set>(std::move(e));
+      return false;
+    }
+  }
+  // After the loop, with the GIL back: raise the first exception a callback raised, if any.
+  void rethrow_error() {
+    if (error_) throw std::move(*error_);
+  }
+  bool interrupted() const { return interrupted_; }
+
+ private:
+  bool interrupted_ = false;
+  std::unique_ptr<py::error_already_set> error_;
+};
 
 // NumPy array that takes ownership of a vector's buffer (no copy).
 template <typename T>

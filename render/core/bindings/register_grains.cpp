@@ -38,37 +38,19 @@ GrainTraceSettings trace_settings(std::uint64_t photons, std::uint64_t seed, dou
 // of photons (the same contract as ptpb_render, DESIGN.md §9).
 template <typename Trace>
 py::dict run_traced(const py::object& progress, Trace&& trace) {
-  bool interrupted = false;
-  std::unique_ptr<py::error_already_set> callback_error;
+  ptpb_bindings::PyCallbacks callbacks;
   GrainProgress cb = [&](std::uint64_t done, std::uint64_t total) {
     py::gil_scoped_acquire gil;
-    if (PyErr_CheckSignals() != 0) {
-      if (PyErr_ExceptionMatches(PyExc_KeyboardInterrupt)) {
-        PyErr_Clear();
-        interrupted = true;
-      } else if (!callback_error) {
-        callback_error = std::make_unique<py::error_already_set>();
-      }
-      return false;
-    }
+    if (!callbacks.signals_allow()) return false;
     if (progress.is_none()) return true;
-    try {
-      py::object keep_going = progress(done, total);
-      return keep_going.is_none() || keep_going.cast<bool>();
-    } catch (py::error_already_set& e) {
-      if (e.matches(PyExc_KeyboardInterrupt))
-        interrupted = true;
-      else if (!callback_error)
-        callback_error = std::make_unique<py::error_already_set>(std::move(e));
-      return false;
-    }
+    return callbacks.keep_going([&] { return progress(done, total); });
   };
   GrainTraceResult r;
   {
     py::gil_scoped_release release;
     r = trace(cb);
   }
-  if (callback_error) throw std::move(*callback_error);
+  callbacks.rethrow_error();
   using ptpb_bindings::owned_array;
   const auto bins = static_cast<py::ssize_t>(r.time_flux.size());
   const auto depth = static_cast<py::ssize_t>(r.absorbed_depth.size());
@@ -93,7 +75,7 @@ py::dict run_traced(const py::object& progress, Trace&& trace) {
   out["interactions"] = r.interactions;
   out["total_internal_reflections"] = r.total_internal_reflections;
   out["photons_done"] = r.photons_done;
-  out["cancelled"] = r.cancelled || interrupted;
+  out["cancelled"] = r.cancelled || callbacks.interrupted();
   return out;
 }
 

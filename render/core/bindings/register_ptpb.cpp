@@ -38,28 +38,13 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
     if (!py::isinstance<py::dict>(resume)) throw std::invalid_argument("resume must be a dict (a checkpoint's state)");
     initial = parse_state(resume.cast<py::dict>());
   }
-  bool interrupted = false;
-  std::unique_ptr<py::error_already_set> callback_error;
-  auto keep_error = [&](py::error_already_set& e) {
-    if (e.matches(PyExc_KeyboardInterrupt))
-      interrupted = true;
-    else if (!callback_error)
-      callback_error = std::make_unique<py::error_already_set>(std::move(e));
-  };
+  PyCallbacks callbacks;
   ProgressCallback cb = [&](const Progress& p) {
     py::gil_scoped_acquire gil;
-    if (PyErr_CheckSignals() != 0) {
-      // Ctrl-C: stop once the iteration under way is complete and return what we have.
-      if (PyErr_ExceptionMatches(PyExc_KeyboardInterrupt)) {
-        PyErr_Clear();
-        interrupted = true;
-      } else if (!callback_error) {
-        callback_error = std::make_unique<py::error_already_set>();
-      }
-      return false;
-    }
+    // Ctrl-C: stop once the iteration under way is complete and return what we have.
+    if (!callbacks.signals_allow()) return false;
     if (progress.is_none()) return true;
-    try {
+    return callbacks.keep_going([&] {
       py::dict info;
       info["iteration"] = p.iteration;
       info["iterations"] = p.iterations;
@@ -69,24 +54,14 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
       info["beams"] = p.beams;
       info["surface_radius"] = p.surface_radius;
       info["surface_photons"] = p.surface_photons;
-      py::object keep_going = progress(info);
-      return keep_going.is_none() || keep_going.cast<bool>();
-    } catch (py::error_already_set& e) {
-      keep_error(e);
-      return false;
-    }
+      return progress(info);
+    });
   };
   CheckpointCallback save;
   if (checkpointing) {
     save = [&](const RenderState& st) {
       py::gil_scoped_acquire gil;
-      try {
-        py::object keep_going = checkpoint(state_dict(st));
-        return keep_going.is_none() || keep_going.cast<bool>();
-      } catch (py::error_already_set& e) {
-        keep_error(e);
-        return false;
-      }
+      return callbacks.keep_going([&] { return checkpoint(state_dict(st)); });
     };
   }
   RenderResult r;
@@ -94,7 +69,7 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
     py::gil_scoped_release release;
     r = render(scene, settings, cb, std::move(initial), save);
   }
-  if (callback_error) throw std::move(*callback_error);
+  callbacks.rethrow_error();
   const py::ssize_t H = r.height, W = r.width, F = r.frame_count;
   py::dict out;
   if (settings.keep_sums) {
@@ -103,7 +78,7 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
     out["frames_sum"] = owned_array(std::move(r.frames_sum), {F, H, W, 3});
     out["early_sum"] = owned_array(std::move(r.early_sum), {H, W, 3});
     out["late_sum"] = owned_array(std::move(r.late_sum), {H, W, 3});
-    out["stats"] = result_stats_dict(r.stats, interrupted);
+    out["stats"] = result_stats_dict(r.stats, callbacks.interrupted());
     return out;
   }
   out["steady"] = owned_array(std::move(r.steady), {H, W, 3});
@@ -115,7 +90,7 @@ py::dict render_py(const py::dict& scene_dict, const py::dict& settings_dict, co
     snaps.append(py::make_tuple(r.snapshot_iterations[i], owned_array(std::move(r.snapshots[i]), {H, W, 3})));
   out["snapshots"] = snaps;
   out["snapshot_seconds"] = py::cast(r.snapshot_seconds);
-  out["stats"] = result_stats_dict(r.stats, interrupted);
+  out["stats"] = result_stats_dict(r.stats, callbacks.interrupted());
   return out;
 }
 
