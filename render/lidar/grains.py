@@ -29,9 +29,9 @@ from scipy.spatial import cKDTree
 
 from render import _core
 from render.lidar.optics import (
-    _ice_real_index,
     ice_absorption_coefficient,
     ice_group_index,
+    ice_refractive_index,
     snow_group_index,
 )
 from render.scene.optics import RHO_ICE
@@ -41,15 +41,15 @@ PresetForm = Literal["preset", "geometric", "isotropic"]
 PRESET_FORMS = ("preset", "geometric", "isotropic")
 
 
-def ice_refractive_index(wavelength_nm: float = 532.0) -> float:
-    """Real index of ice at a laser line (Warren & Brandt 2008, as render.lidar.optics reads it): 1.3117 at 532."""
-    return _ice_real_index(wavelength_nm)
-
-
 def sphere_absorption_enhancement(refractive_index: float) -> float:
     """B = n²[1 − (1 − 1/n²)^{3/2}]: a weakly absorbing sphere absorbs B γ V (Bohren & Huffman 1983 §7.2)."""
     n2 = refractive_index * refractive_index
     return n2 * (1.0 - (1.0 - 1.0 / n2) ** 1.5)
+
+
+def _ice_sphere_enhancement(wavelength_nm: float) -> float:
+    """B of an ice sphere at a laser line."""
+    return sphere_absorption_enhancement(ice_refractive_index(wavelength_nm))
 
 
 @dataclass(frozen=True)
@@ -161,7 +161,7 @@ def homogenised_preset(
     if form not in PRESET_FORMS:
         raise ValueError(f"form must be one of {PRESET_FORMS}, got {form!r}")
     phi = density / RHO_ICE
-    b = sphere_absorption_enhancement(ice_refractive_index(wavelength_nm))
+    b = _ice_sphere_enhancement(wavelength_nm)
     absorption = b * ice_absorption_coefficient(wavelength_nm) * phi
     extinction = 3.0 * phi / grain_diameter
     g = SPHERE_ASYMMETRY
@@ -314,7 +314,7 @@ def trace_homogenised(
 
 def snow_clock(density: float, wavelength_nm: float = 532.0) -> float:
     """n_snow for spheres: render.lidar.optics.snow_group_index with the sphere's B."""
-    b = sphere_absorption_enhancement(ice_refractive_index(wavelength_nm))
+    b = _ice_sphere_enhancement(wavelength_nm)
     return snow_group_index(density, absorption_enhancement=b, wavelength_nm=wavelength_nm)
 
 
@@ -334,7 +334,7 @@ def compare(
     depth: fit over ``fit_depths``; paths: ice over air path against B φ/(1 − φ), of all photons and of the exits in
     the window, and all photons' path per metre of homogenised path against 1 − φ + B φ."""
     phi = density / RHO_ICE
-    b = sphere_absorption_enhancement(ice_refractive_index(wavelength_nm))
+    b = _ice_sphere_enhancement(wavelength_nm)
     h_path = homogenised["air_path"]
     out = {
         "volume_fraction": phi,

@@ -110,7 +110,8 @@ def ice_absorption_coefficient(wavelength_nm: float, data_set: str = DEFAULT_ICE
     return 4.0 * math.pi * ice_imaginary_index(wavelength_nm, data_set) / (wavelength_nm * 1e-9)
 
 
-def _ice_real_index(wavelength_nm: float) -> float:
+def ice_refractive_index(wavelength_nm: float = 532.0) -> float:
+    """Real (phase) index of ice, Warren & Brandt 2008 interpolated linearly: 1.3117 at 532 nm."""
     wavelengths = np.array(sorted(_WARREN_BRANDT_2008_N))
     return float(np.interp(wavelength_nm, wavelengths, [_WARREN_BRANDT_2008_N[w] for w in wavelengths]))
 
@@ -120,8 +121,8 @@ def ice_group_index(wavelength_nm: float = 532.0) -> float:
     532 nm, 1.3196 at 1064 nm. dn/dλ is the central difference one table row (10 nm) either side of λ."""
     wavelength = _check_wavelength(wavelength_nm)
     step = _N_TABLE_STEP_NM
-    slope = (_ice_real_index(wavelength + step) - _ice_real_index(wavelength - step)) / (2.0 * step)
-    return _ice_real_index(wavelength) - wavelength * slope
+    slope = (ice_refractive_index(wavelength + step) - ice_refractive_index(wavelength - step)) / (2.0 * step)
+    return ice_refractive_index(wavelength) - wavelength * slope
 
 
 def snow_group_index(density: float, absorption_enhancement: float = 1.6, wavelength_nm: float = 532.0) -> float:
