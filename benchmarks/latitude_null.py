@@ -5,7 +5,9 @@ air and season at 65 S), from starts of different RMS roughness: the RMS relief 
 RMS) after 60 days and over the preset's whole season, and 65 S over Tapado. Penitentes should not grow at 65 S,
 so a start that lets 65 S grow as much as Tapado is one the model's latitude null cannot carry.
 
-Run: .venv/bin/python benchmarks/latitude_null.py [--rms 0.03 0.045] [--seeds 7 8]
+Run: .venv/bin/python benchmarks/latitude_null.py [--rms 0.03 0.045] [--seeds 7 8] [--demo-grid]
+--demo-grid grows on the demo's grid (256^2 over 8 m, whose box holds five or six mature rows where V3's holds two
+or three) from the preset's start (3 cm), seeds 1 and 2, and writes latitude_null_demo_grid.
 Prints the table and writes benchmarks/results/latitude_null.md and .csv (results/local/ with other arguments).
 """
 
@@ -28,41 +30,53 @@ from pipeline.schema.geometry import GeometryConfig  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 SITES = ROOT / "configs" / "presets" / "sites"
 REDUCED = {"grid_cells": 128, "domain_size": 4.0}  # V3's reduced run (tests/geometry/test_geometry_morphology.py)
+DEMO_GRID = {"grid_cells": 256, "domain_size": 8.0}  # configs/demo.yaml
 EARLY = 60  # [days]
 
 
-def relief_growth(preset: str, rms: float, seed: int) -> tuple[float, float, int]:
-    """RMS relief grown by day EARLY and by the season's end [m], and the season's length [days]."""
+def relief_growth(preset: str, rms: float, seed: int, grid: dict) -> np.ndarray:
+    """RMS relief grown (RMS minus the start's) [m] on each day of the preset's season, day 0 first, on ``grid``
+    (grid_cells and domain_size)."""
     raw = load_raw(SITES / preset)["geometry"]
     days = int(raw["days"])
-    cfg = GeometryConfig(**{**raw, **REDUCED, "initial_roughness_rms": rms, "snapshots": days + 1})
+    cfg = GeometryConfig(**{**raw, **grid, "initial_roughness_rms": rms, "snapshots": days + 1})
     rng = np.random.default_rng(seed)
     h0 = ablation.initial_height_field_from_config(cfg, rng)
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
-    day = grown.snapshot_days.tolist()
-    start = h0.std()
-    return float(grown.snapshots[day.index(EARLY)].std() - start), float(grown.height.std() - start), days
+    if grown.snapshot_days.tolist() != list(range(days + 1)):
+        raise RuntimeError(f"{preset}: expected a snapshot on every day of the {days}-day season")
+    return grown.snapshots.reshape(days + 1, -1).std(axis=1) - h0.std()
 
 
 def main() -> None:
     run = start()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--rms", type=float, nargs="+", default=[0.03, 0.045])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[7, 8])
+    parser.add_argument(
+        "--rms", type=float, nargs="+", help="start RMS [m] (default 0.03 0.045; 0.03 on the demo grid)"
+    )
+    parser.add_argument("--seeds", type=int, nargs="+", help="default 7 8; 1 2 on the demo grid")
+    parser.add_argument("--demo-grid", action="store_true", help="256^2 over 8 m instead of V3's 128^2 over 4 m")
     args = parser.parse_args()
+    grid = DEMO_GRID if args.demo_grid else REDUCED
+    rms_list = args.rms or ([0.03] if args.demo_grid else [0.03, 0.045])
+    seeds = args.seeds or ([1, 2] if args.demo_grid else [7, 8])
     lines = [
         "| start RMS [m] | seed | Tapado, day 60 [m] | 65°S, day 60 [m] | 65°S / Tapado, day 60 | Tapado, season [m] "
-        "| 65°S, season [m] | 65°S / Tapado, season |",
-        "|---|---|---|---|---|---|---|---|",
+        "| 65°S, season [m] | 65°S / Tapado, season | 65°S / Tapado, largest from day 60 (day) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     rows = []
-    for rms in args.rms:
-        for seed in args.seeds:
-            t60, tend, days = relief_growth("tapado.yaml", rms, seed)
-            h60, hend, _ = relief_growth("high_latitude_65s.yaml", rms, seed)
+    for rms in rms_list:
+        for seed in seeds:
+            tapado = relief_growth("tapado.yaml", rms, seed, grid)
+            polar = relief_growth("high_latitude_65s.yaml", rms, seed, grid)
+            days = tapado.size - 1
+            t60, tend, h60, hend = tapado[EARLY], tapado[-1], polar[EARLY], polar[-1]
+            ratio = polar[EARLY:] / tapado[EARLY:]
+            worst = int(np.argmax(ratio))
             lines.append(
                 f"| {rms:g} | {seed} | {t60:.3f} | {h60:.3f} | {h60 / t60:.0%} | {tend:.3f} | {hend:.3f} | "
-                f"{hend / tend:.0%} |"
+                f"{hend / tend:.0%} | {ratio[worst]:.0%} ({EARLY + worst}) |"
             )
             print(lines[-1], flush=True)
             rows.append(
@@ -73,15 +87,17 @@ def main() -> None:
                     "s65_day60_m": h60,
                     "tapado_season_m": tend,
                     "s65_season_m": hend,
+                    "largest_ratio_from_day60": float(ratio[worst]),
+                    "largest_ratio_day": EARLY + worst,
                 }
             )
     text = (
-        f"RMS relief grown (final minus start) on 128² over 4 m; the season is the preset's {days} days.\n\n"
-        + "\n".join(lines)
-        + "\n"
+        f"RMS relief grown (final minus start) on {grid['grid_cells']}² over {grid['domain_size']:g} m; the season is the "
+        f"preset's {days} days.\n\n" + "\n".join(lines) + "\n"
     )
     print(text)
-    write_results("latitude_null", text, run, rows=rows, standard=is_standard(parser, args))
+    name = "latitude_null_demo_grid" if args.demo_grid else "latitude_null"
+    write_results(name, text, run, rows=rows, standard=is_standard(parser, args, ignore=("demo_grid",)))
 
 
 if __name__ == "__main__":
