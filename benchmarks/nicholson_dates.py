@@ -6,6 +6,9 @@ the share of cells steeper than 45° (morphology.slope_deg), the ridge azimuth a
 start, and the stage (pitted, suncups, penitentes; DESIGN.md 7, *Stages*).
 
 Run: .venv/bin/python benchmarks/nicholson_dates.py [--config configs/demo.yaml] [--seeds 1 2] [--set KEY=VALUE ...]
+     [--earlier-start 258]
+The second table grows the same season from an earlier start (15 Sep by default), which tells whether the date of
+the penitente stage follows the season's length or the calendar.
 Prints the table and writes benchmarks/results/nicholson_dates.md and .csv (results/local/ with other arguments).
 """
 
@@ -13,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from datetime import date, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SURVEYS = [("25 Nov", 329), ("11 Dec", 345), ("20 Dec", 354), ("3 Jan", 3)]
 
 
-def survey_rows(config: str, overrides: list[str], seed: int) -> list[dict]:
+def survey_rows(config: str, overrides: list[str], seed: int) -> tuple[list[dict], str]:
+    """One seed's row on each survey date, and the date on which the stage first reads penitentes (and stays so
+    to the last survey), or "not by 3 Jan"."""
     base = load_config(config, [*overrides, f"seed={seed}"]).geometry
     offsets = [(day - base.start_day_of_year) % 365 for _, day in SURVEYS]
     cfg = load_config(
@@ -47,6 +53,7 @@ def survey_rows(config: str, overrides: list[str], seed: int) -> list[dict]:
         stage = morphology.stage_metrics(h, cfg.spacing)
         rows.append(
             {
+                "start_day_of_year": cfg.start_day_of_year,
                 "date": label,
                 "day": offset,
                 "spacing": shape["crest_spacing_m"],
@@ -59,12 +66,19 @@ def survey_rows(config: str, overrides: list[str], seed: int) -> list[dict]:
                 "stage": stage["stage"],
             }
         )
-    return rows
+    labels = [morphology.stage_metrics(h, cfg.spacing)["stage"] for h in grown.snapshots]
+    settled = len(labels)
+    while settled > 0 and labels[settled - 1] == "penitentes":
+        settled -= 1
+    if settled == len(labels):
+        return rows, "not by 3 Jan"
+    when = date(2013, 1, 1) + timedelta(days=(cfg.start_day_of_year - 1 + int(days[settled])) % 365)
+    return rows, f"{when.day} {when:%b} (day {int(days[settled])})"
 
 
 def table(config: str, overrides: list[str], seeds: list[int]) -> tuple[str, list[dict]]:
     """The Markdown table (seeds side by side in each cell) and its rows, one per seed and date."""
-    runs = [survey_rows(config, overrides, s) for s in seeds]
+    runs, firsts = zip(*(survey_rows(config, overrides, s) for s in seeds), strict=True)
     shown = Path(config).resolve()
     shown_config = shown.relative_to(ROOT) if shown.is_relative_to(ROOT) else shown
     lines = [
@@ -85,6 +99,7 @@ def table(config: str, overrides: list[str], seeds: list[int]) -> tuple[str, lis
             f"{cell('density', '{:.1f}')} | {cell('steep', '{:.0%}')} | {azimuth} | {cell('lowering', '{:.2f}')} | "
             f"{' / '.join(r[i]['stage'] for r in runs)} |"
         )
+    lines += ["", f"Penitentes from (to the last survey): {' / '.join(firsts)}."]
     rows = [{"seed": seed, **row} for seed, run in zip(seeds, runs, strict=True) for row in run]
     return "\n".join(lines) + "\n", rows
 
@@ -95,8 +110,22 @@ def main() -> None:
     parser.add_argument("--config", default=str(ROOT / "configs" / "demo.yaml"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
+    parser.add_argument(
+        "--earlier-start",
+        type=int,
+        default=258,
+        help="day of year of a second, earlier season start to table beside the config's (258: 15 Sep; 0: none)",
+    )
     args = parser.parse_args()
     text, rows = table(args.config, args.overrides, args.seeds)
+    if args.earlier_start:
+        earlier = [*args.overrides, f"geometry.start_day_of_year={args.earlier_start}"]
+        more, more_rows = table(args.config, earlier, args.seeds)
+        text += (
+            "\nThe same season started earlier: does an older field stand at the penitente stage by the first survey?"
+            "\n\n" + more
+        )
+        rows += more_rows
     print(text)
     write_results("nicholson_dates", text, run, rows=rows, standard=is_standard(parser, args))
 
