@@ -24,13 +24,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _results import is_standard, start, write_results  # noqa: E402
 
 from geometry import ablation  # noqa: E402
-from pipeline.config import load_raw  # noqa: E402
+from pipeline.config import load_config, load_raw  # noqa: E402
 from pipeline.schema.geometry import GeometryConfig  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SITES = ROOT / "configs" / "presets" / "sites"
 REDUCED = {"grid_cells": 128, "domain_size": 4.0}  # V3's reduced run (tests/geometry/test_geometry_morphology.py)
-DEMO_GRID = {"grid_cells": 256, "domain_size": 8.0}  # configs/demo.yaml
 EARLY = 60  # [days]
 
 
@@ -57,7 +56,11 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", help="default 7 8; 1 2 on the demo grid")
     parser.add_argument("--demo-grid", action="store_true", help="256^2 over 8 m instead of V3's 128^2 over 4 m")
     args = parser.parse_args()
-    grid = DEMO_GRID if args.demo_grid else REDUCED
+    if args.demo_grid:
+        demo = load_config(ROOT / "configs" / "demo.yaml").geometry
+        grid = {"grid_cells": demo.grid_cells, "domain_size": demo.domain_size}
+    else:
+        grid = REDUCED
     rms_list = args.rms or ([0.03] if args.demo_grid else [0.03, 0.045])
     seeds = args.seeds or ([1, 2] if args.demo_grid else [7, 8])
     lines = [

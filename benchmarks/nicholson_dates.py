@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from datetime import date, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _results import is_standard, start, write_results  # noqa: E402
 
 from geometry import ablation, metrics, morphology  # noqa: E402
+from geometry.sunpath import calendar_day  # noqa: E402
 from pipeline.config import load_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,11 +46,12 @@ def survey_rows(config: str, overrides: list[str], seed: int) -> tuple[list[dict
     grown = ablation.grow_field(h0, cfg.spacing, ablation.settings_from_config(cfg), rng)
     days = grown.snapshot_days.tolist()
     radius = metrics.crest_radius(cfg.optical_efolding_depth)
+    stages = [morphology.stage_metrics(h, cfg.spacing)["stage"] for h in grown.snapshots]
     rows = []
     for (label, _), offset in zip(SURVEYS, offsets, strict=True):
-        h = grown.snapshots[days.index(offset)]
+        snapshot = days.index(offset)
+        h = grown.snapshots[snapshot]
         shape = metrics.morphology(h, cfg.spacing, radius)
-        stage = morphology.stage_metrics(h, cfg.spacing)
         rows.append(
             {
                 "start_day_of_year": cfg.start_day_of_year,
@@ -63,17 +64,16 @@ def survey_rows(config: str, overrides: list[str], seed: int) -> tuple[list[dict
                 "azimuth": shape["ridge_azimuth_deg"],
                 "coherence": shape["coherence"],
                 "lowering": float(h0.mean() - h.mean()),
-                "stage": stage["stage"],
+                "stage": stages[snapshot],
             }
         )
-    labels = [morphology.stage_metrics(h, cfg.spacing)["stage"] for h in grown.snapshots]
-    settled = len(labels)
-    while settled > 0 and labels[settled - 1] == "penitentes":
+    settled = len(stages)
+    while settled > 0 and stages[settled - 1] == "penitentes":
         settled -= 1
-    if settled == len(labels):
+    if settled == len(stages):
         return rows, "not by 3 Jan"
-    when = date(2013, 1, 1) + timedelta(days=(cfg.start_day_of_year - 1 + int(days[settled])) % 365)
-    return rows, f"{when.day} {when:%b} (day {int(days[settled])})"
+    day = int(days[settled])
+    return rows, f"{calendar_day(cfg.start_day_of_year + day)} (day {day})"
 
 
 def table(config: str, overrides: list[str], seeds: list[int]) -> tuple[str, list[dict]]:

@@ -7,11 +7,19 @@ DESIGN.md section 3.2 (Cooper 1969 declination).
 
 from __future__ import annotations
 
+import datetime
 from dataclasses import dataclass
 
 import numpy as np
 
 SECONDS_PER_DAY = 86400.0
+
+
+def calendar_day(day_of_year: int) -> str:
+    """A day of the year on the model's 365-day calendar, as a date: 1 -> '1 Jan', 355 -> '21 Dec'; days
+    past 365 wrap into the next year."""
+    date = datetime.date(2025, 1, 1) + datetime.timedelta(days=(int(day_of_year) - 1) % 365)  # 2025: 365 days
+    return f"{date.day} {date:%b}"
 
 
 def declination(day_of_year: float | np.ndarray) -> np.ndarray:

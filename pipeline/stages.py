@@ -7,8 +7,6 @@ Heavy modules are imported inside the functions so that `python -m pipeline vali
 
 from __future__ import annotations
 
-import datetime
-
 from pipeline.runner import Stage, StageContext
 from pipeline.space import film_bytes, image_bytes
 
@@ -89,9 +87,10 @@ def site_day(config) -> int:
 def run_title(config) -> str:
     """A video title from the config: latitude, date and sun, e.g. 'Penitentes at 30.1°S, 3 Jan, sun at
     10:00 solar time: light in flight'."""
+    from geometry.sunpath import calendar_day
+
     latitude = config.geometry.latitude
     site = f"{abs(latitude):.1f}°{'S' if latitude < 0 else 'N'}"
-    date = datetime.date(2025, 1, 1) + datetime.timedelta(days=site_day(config) - 1)  # a year of 365 days
     sun = config.scene.sun
     if not sun.enabled:
         light = "no sun"
@@ -100,7 +99,7 @@ def run_title(config) -> str:
         light = f"sun at {hours:02d}:{minutes:02d} solar time"
     else:
         light = f"sun {sun.elevation_deg:g}° high"
-    return f"Penitentes at {site}, {date.day} {date:%b}, {light}: light in flight"
+    return f"Penitentes at {site}, {calendar_day(site_day(config))}, {light}: light in flight"
 
 
 def composite_stage(ctx: StageContext) -> dict:
